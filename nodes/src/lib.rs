@@ -1,0 +1,5 @@
+//! equiarm's nodes: thin adapters between DDS topics and the library crates.
+//!
+//! [`ros`] is the only module that talks to ros2-client; each node maps topics to library calls.
+
+pub mod ros;

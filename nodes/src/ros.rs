@@ -1,0 +1,364 @@
+//! The one place equiarm touches ros2-client: context and node creation (names, namespaces,
+//! `ROS_DOMAIN_ID`, `ROS_LOCALHOST_ONLY`), the QoS profiles of the topic graph, typed publishers and
+//! subscriptions on tokio, the spinner task, and shutdown on SIGINT/SIGTERM.
+//!
+//! ## Distro
+//! ros2-client is built with its `jazzy` feature (see the workspace `Cargo.toml`): Jazzy and every
+//! later distro (Kilted, Lyrical, Rolling) use the 16-byte Gid in `ros_discovery_info`, so `ros2 node
+//! list` and `ros2 topic` see our nodes there. Humble uses a 24-byte Gid; Humble users must rebuild
+//! with ros2-client's `humble` feature instead. Topic data (CDR) is the same for all distros.
+//!
+//! ## Limitations
+//! - Parameter services are off: ros2-client answers them only with the Fast DDS ("Enhanced")
+//!   service mapping, which rmw_cyclonedds clients cannot use (DDS_NOTES §2.7). Configuration comes
+//!   from the command line instead.
+//! - RustDDS keeps up to 8192 unacknowledged samples per reliable writer and has no back-pressure:
+//!   publish large samples only as fast as the lock-step loop needs.
+
+use std::collections::HashMap;
+use std::marker::PhantomData;
+use std::net::Ipv4Addr;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use anyhow::{Context as _, anyhow, bail};
+use equiarm_msgs::RosMessage;
+use log::{debug, info, warn};
+use ros2_client::dds::rustdds::DomainParticipantBuilder;
+use ros2_client::qos::{Durability, History, QosProfile, WhenFull};
+use ros2_client::{Context, MessageInfo, MessageTypeName, Name, Node, NodeName, NodeOptions, ReadError};
+
+/// QoS profiles of the equiarm topic graph (ARCHITECTURE §4).
+pub mod qos {
+    use super::*;
+
+    /// Camera images and camera info: best effort, volatile, keep-last 1 (ROS `qos_profile_sensor_data`
+    /// up to depth; rclpy subscribers must use the sensor-data profile).
+    pub fn sensor_data() -> QosProfile {
+        QosProfile::subscription_default()
+            .reliability_best_effort()
+            .durability(Durability::Volatile)
+            .history(History::KeepLast { depth: 1 })
+    }
+
+    /// Observations and gripper commands: reliable, volatile, keep-last 10 (rclpy's default profile,
+    /// so `create_subscription(Msg, topic, 10)` in rclpy matches).
+    pub fn command() -> QosProfile {
+        reliable(10)
+    }
+
+    /// Transitions, episode results, trainer status: reliable, volatile, keep-last `depth`. The rate is
+    /// bounded by the lock-step loop, so a bounded history loses nothing in practice.
+    pub fn stream(depth: usize) -> QosProfile {
+        reliable(depth)
+    }
+
+    /// Policy weights: reliable, transient-local, keep-last 1, so a policy node started late gets the
+    /// latest weights. Only for samples published rarely (RustDDS keeps unacked samples for late joiners).
+    pub fn latched() -> QosProfile {
+        reliable(1).durability(Durability::TransientLocal)
+    }
+
+    fn reliable(depth: usize) -> QosProfile {
+        QosProfile::publisher_default()
+            .reliability_reliable(WhenFull::Wait(Duration::from_millis(100)))
+            .durability(Durability::Volatile)
+            .history(History::KeepLast { depth })
+    }
+}
+
+/// Where and how a node joins the ROS 2 graph. [`RosOptions::from_env`] reads the environment the
+/// way ROS 2 tools do; everything is also settable by hand (tests use their own domain ids).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RosOptions {
+    /// DDS domain (ROS_DOMAIN_ID), 0..=232.
+    pub domain_id: u16,
+    /// Use only the loopback interface (ROS_LOCALHOST_ONLY=1 or ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST).
+    pub localhost_only: bool,
+}
+
+impl Default for RosOptions {
+    fn default() -> Self {
+        Self { domain_id: 0, localhost_only: false }
+    }
+}
+
+impl RosOptions {
+    /// Reads `ROS_DOMAIN_ID`, `ROS_LOCALHOST_ONLY` and `ROS_AUTOMATIC_DISCOVERY_RANGE` (RustDDS ignores
+    /// them, so we apply them ourselves). A malformed value is an error naming the variable.
+    pub fn from_env() -> anyhow::Result<Self> {
+        Self::from_vars(|k| std::env::var(k).ok())
+    }
+
+    /// As [`Self::from_env`], reading variables through `get` (for tests).
+    pub fn from_vars(get: impl Fn(&str) -> Option<String>) -> anyhow::Result<Self> {
+        let domain_id = match get("ROS_DOMAIN_ID").map(|s| s.trim().to_string()) {
+            None => 0,
+            Some(s) if s.is_empty() => 0,
+            Some(s) => match s.parse::<u16>() {
+                Ok(d) if d <= 232 => d,
+                _ => bail!("ROS_DOMAIN_ID='{s}' is not a DDS domain id (an integer 0..=232)"),
+            },
+        };
+        let localhost_only = get("ROS_LOCALHOST_ONLY").is_some_and(|v| v.trim() == "1")
+            || get("ROS_AUTOMATIC_DISCOVERY_RANGE").is_some_and(|v| v.trim().eq_ignore_ascii_case("LOCALHOST"));
+        Ok(Self { domain_id, localhost_only })
+    }
+}
+
+/// A ROS 2 node with its DDS participant and spinner. Dropping it leaves the graph cleanly.
+pub struct RosNode {
+    // Field order matters: the node is dropped before its context.
+    node: Node,
+    context: Context,
+    fqn: String,
+    bad_input: Arc<BadInputLog>,
+}
+
+impl RosNode {
+    /// Creates a node `name` in `namespace` (`"/"` or `"/env0"`), joins the domain and starts the
+    /// spinner on the current tokio runtime.
+    pub fn new(namespace: &str, name: &str, opts: &RosOptions) -> anyhow::Result<Self> {
+        let mut builder = DomainParticipantBuilder::new(opts.domain_id);
+        if opts.localhost_only {
+            builder = builder.with_only_networks([Ipv4Addr::LOCALHOST]);
+        }
+        let participant =
+            builder.build().map_err(|e| anyhow!("creating DDS participant on domain {}: {e:?}", opts.domain_id))?;
+        let context = Context::from_domain_participant(participant)
+            .map_err(|e| anyhow!("creating ROS 2 context on domain {}: {e:?}", opts.domain_id))?;
+        let node_name = NodeName::new(namespace, name)
+            .map_err(|e| anyhow!("bad node name '{name}' in namespace '{namespace}': {e:?}"))?;
+        let options = NodeOptions::new().enable_rosout(true).start_parameter_services(false);
+        let mut node = context.new_node(node_name, options).map_err(|e| anyhow!("creating node '{name}': {e:?}"))?;
+        let spinner = node.spinner().map_err(|e| anyhow!("creating spinner of node '{name}': {e:?}"))?;
+        let fqn = if namespace == "/" { format!("/{name}") } else { format!("{namespace}/{name}") };
+        let task_name = fqn.clone();
+        tokio::spawn(async move {
+            if let Err(e) = spinner.spin().await {
+                warn!("{task_name}: spinner stopped: {e:?}");
+            }
+        });
+        info!("{fqn}: joined ROS 2 domain {} (localhost only: {})", opts.domain_id, opts.localhost_only);
+        Ok(Self { node, context, fqn, bad_input: Arc::new(BadInputLog::default()) })
+    }
+
+    /// Fully qualified node name, e.g. `/env0/sim`.
+    pub fn name(&self) -> &str {
+        &self.fqn
+    }
+
+    /// The DDS domain this node is on.
+    pub fn domain_id(&self) -> u16 {
+        self.context.domain_id()
+    }
+
+    /// Topic name resolution as in ROS 2: absolute names stay, relative ones get the node namespace.
+    fn topic<M: RosMessage>(&self, topic: &str, qos: &QosProfile) -> anyhow::Result<ros2_client::dds::rustdds::Topic> {
+        let name = Name::parse(topic).map_err(|e| anyhow!("bad topic name '{topic}': {e:?}"))?;
+        self.node
+            .create_topic(&name, MessageTypeName::new(M::PACKAGE, M::NAME), qos)
+            .map_err(|e| anyhow!("creating topic '{topic}' ({}): {e:?}", M::TYPE_NAME))
+    }
+
+    /// A publisher of `M` on `topic` with `qos`.
+    pub fn publisher<M: RosMessage>(&mut self, topic: &str, qos: QosProfile) -> anyhow::Result<Publisher<M>> {
+        let t = self.topic::<M>(topic, &qos)?;
+        let inner = self
+            .node
+            .create_publisher::<M>(&t, Some(qos))
+            .map_err(|e| anyhow!("creating publisher on '{topic}' ({}): {e:?}", M::TYPE_NAME))?;
+        debug!("{}: publishing {} on {topic}", self.fqn, M::TYPE_NAME);
+        Ok(Publisher { inner, topic: topic.to_string() })
+    }
+
+    /// A subscription to `M` on `topic` with `qos`. Payloads that do not decode are counted, logged once
+    /// per topic, and skipped (see [`Subscriber::recv`]).
+    pub fn subscription<M: RosMessage>(&mut self, topic: &str, qos: QosProfile) -> anyhow::Result<Subscriber<M>> {
+        let t = self.topic::<M>(topic, &qos)?;
+        let inner = self
+            .node
+            .create_subscription::<M>(&t, Some(qos))
+            .map_err(|e| anyhow!("creating subscription on '{topic}' ({}): {e:?}", M::TYPE_NAME))?;
+        debug!("{}: subscribed to {} on {topic}", self.fqn, M::TYPE_NAME);
+        Ok(Subscriber { inner, topic: topic.to_string(), log: self.bad_input.clone(), _m: PhantomData })
+    }
+
+    /// Payloads dropped because they did not decode, per topic, since the node started.
+    pub fn bad_input_counts(&self) -> HashMap<String, u64> {
+        self.bad_input.counts()
+    }
+
+    /// Waits until a publisher has matched at least one subscription, up to `timeout`.
+    /// Returns whether one matched. (Matching on our side does not prove the remote side has matched
+    /// too: don't rely on the first sample of a volatile stream.)
+    pub async fn wait_for_subscription<M: RosMessage>(&self, publ: &Publisher<M>, timeout: Duration) -> bool {
+        tokio::time::timeout(timeout, publ.inner.wait_for_subscription(&self.node)).await.is_ok()
+    }
+
+    /// Waits until a subscription has matched at least one publisher, up to `timeout`.
+    pub async fn wait_for_publisher<M: RosMessage>(&self, sub: &Subscriber<M>, timeout: Duration) -> bool {
+        tokio::time::timeout(timeout, sub.inner.wait_for_publisher(&self.node)).await.is_ok()
+    }
+}
+
+/// Counts of dropped payloads, shared by the subscriptions of one node.
+#[derive(Default)]
+struct BadInputLog {
+    counts: Mutex<HashMap<String, u64>>,
+}
+
+impl BadInputLog {
+    /// Counts one bad payload on `topic`; returns the new count (1 means: log it).
+    fn record(&self, topic: &str) -> u64 {
+        let mut c = self.counts.lock().unwrap_or_else(|p| p.into_inner());
+        let n = c.entry(topic.to_string()).or_insert(0);
+        *n += 1;
+        *n
+    }
+
+    fn counts(&self) -> HashMap<String, u64> {
+        self.counts.lock().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+}
+
+/// A typed publisher; [`Publisher::publish`] never blocks the runtime for long (reliable writers wait
+/// at most 100 ms for window space, then report an error).
+pub struct Publisher<M: RosMessage> {
+    inner: ros2_client::Publisher<M>,
+    topic: String,
+}
+
+impl<M: RosMessage> Publisher<M> {
+    /// Publishes `msg`; the error names the topic and type.
+    pub async fn publish(&self, msg: M) -> anyhow::Result<()> {
+        self.inner
+            .async_publish(msg)
+            .await
+            .map_err(|e| anyhow!("publishing {} on '{}': {e:?}", M::TYPE_NAME, self.topic))
+    }
+
+    /// The topic name as given at creation.
+    pub fn topic(&self) -> &str {
+        &self.topic
+    }
+
+    /// Subscriptions matched so far (0 until the first match).
+    pub fn subscription_count(&self, node: &RosNode) -> usize {
+        self.inner.get_subscription_count(&node.node)
+    }
+}
+
+/// A typed subscription that survives bad input.
+pub struct Subscriber<M: RosMessage> {
+    inner: ros2_client::Subscription<M>,
+    topic: String,
+    log: Arc<BadInputLog>,
+    _m: PhantomData<M>,
+}
+
+impl<M: RosMessage> Subscriber<M> {
+    /// The next message that decodes, with its metadata. A payload that does not decode as `M` is
+    /// counted, logged (the first time per topic, with topic and type), and skipped; reading goes on.
+    /// Returns an error only if the middleware itself fails (reader closed).
+    pub async fn recv(&self) -> anyhow::Result<(M, MessageInfo)> {
+        loop {
+            match self.inner.async_take().await {
+                Ok(v) => return Ok(v),
+                Err(ReadError::Deserialization { reason }) => {
+                    if self.log.record(&self.topic) == 1 {
+                        warn!(
+                            "dropping a payload on '{}' that does not decode as {}: {reason} \
+                             (further ones on this topic are only counted)",
+                            self.topic,
+                            M::TYPE_NAME
+                        );
+                    }
+                }
+                Err(ReadError::Closed) => bail!("subscription to '{}' ({}) closed", self.topic, M::TYPE_NAME),
+                Err(e) => {
+                    warn!("reading '{}' ({}): {e}; retrying", self.topic, M::TYPE_NAME);
+                    tokio::time::sleep(Duration::from_millis(10)).await;
+                }
+            }
+        }
+    }
+
+    /// As [`Self::recv`] but gives up after `timeout` (`Ok(None)`).
+    pub async fn recv_timeout(&self, timeout: Duration) -> anyhow::Result<Option<(M, MessageInfo)>> {
+        match tokio::time::timeout(timeout, self.recv()).await {
+            Ok(r) => r.map(Some),
+            Err(_) => Ok(None),
+        }
+    }
+
+    /// The topic name as given at creation.
+    pub fn topic(&self) -> &str {
+        &self.topic
+    }
+
+    /// Payloads dropped on this topic so far.
+    pub fn bad_input_count(&self) -> u64 {
+        self.log.counts().get(&self.topic).copied().unwrap_or(0)
+    }
+}
+
+/// Resolves when the process gets SIGINT (Ctrl-C) or SIGTERM; nodes select on it to shut down cleanly.
+pub async fn shutdown_signal() -> anyhow::Result<&'static str> {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        let mut term = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
+        let mut int = signal(SignalKind::interrupt()).context("installing the SIGINT handler")?;
+        tokio::select! {
+            _ = term.recv() => Ok("SIGTERM"),
+            _ = int.recv() => Ok("SIGINT"),
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        tokio::signal::ctrl_c().await.context("installing the Ctrl-C handler")?;
+        Ok("Ctrl-C")
+    }
+}
+
+/// The default log filter: our crates at info, RustDDS's per-datagram warnings and error floods off
+/// (DDS_NOTES §3.6). `RUST_LOG` overrides it.
+pub const DEFAULT_LOG_FILTER: &str =
+    "info,rustdds=warn,rustdds::network::udp_sender=error,rustdds::structure::sequence_number=off,ros2_client=warn";
+
+/// Initialises logging to stderr once per process (later calls do nothing).
+pub fn init_logging() {
+    let env = env_logger::Env::default().default_filter_or(DEFAULT_LOG_FILTER);
+    let _ = env_logger::Builder::from_env(env).format_timestamp_millis().try_init();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn vars<'a>(pairs: &'a [(&'a str, &'a str)]) -> impl Fn(&str) -> Option<String> + 'a {
+        move |k| pairs.iter().find(|(n, _)| *n == k).map(|(_, v)| v.to_string())
+    }
+
+    #[test]
+    fn ros_env_is_read_and_validated() {
+        assert_eq!(RosOptions::from_vars(vars(&[])).unwrap(), RosOptions::default());
+        let o = RosOptions::from_vars(vars(&[("ROS_DOMAIN_ID", "42"), ("ROS_LOCALHOST_ONLY", "1")])).unwrap();
+        assert_eq!(o, RosOptions { domain_id: 42, localhost_only: true });
+        let o = RosOptions::from_vars(vars(&[("ROS_AUTOMATIC_DISCOVERY_RANGE", "localhost")])).unwrap();
+        assert!(o.localhost_only);
+        for bad in ["233", "-1", "abc"] {
+            let e = RosOptions::from_vars(vars(&[("ROS_DOMAIN_ID", bad)])).unwrap_err().to_string();
+            assert!(e.contains("ROS_DOMAIN_ID") && e.contains(bad), "{e}");
+        }
+    }
+
+    #[test]
+    fn qos_profiles_match_the_architecture() {
+        assert_eq!(qos::sensor_data().reliability, ros2_client::qos::Reliability::BestEffort);
+        assert_eq!(qos::command().history, History::KeepLast { depth: 10 });
+        assert_eq!(qos::latched().durability, Durability::TransientLocal);
+        assert_eq!(qos::latched().history, History::KeepLast { depth: 1 });
+    }
+}
