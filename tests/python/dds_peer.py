@@ -1,0 +1,128 @@
+"""A Cyclone DDS peer for the interop tests, using ROS 2's DDS naming (topics `rt/...`, types
+`pkg::msg::dds_::Type_`) and rclpy's QoS profiles, i.e. what an rclpy node on rmw_cyclonedds puts on
+the wire. Every loop is bounded in count and time.
+
+    dds_peer.py receive DOMAIN SECONDS   subscribe to the interop topics; print one JSON line per
+                                         received sample telling whether it equals the golden value
+                                         (floats bit for bit); exit after 3 samples of each topic
+    dds_peer.py send DOMAIN SECONDS      publish the golden GripperCommands alternately, 20 Hz
+    dds_peer.py send-bad DOMAIN SECONDS  publish payloads that do not decode as GripperCommand under
+                                         its type name, 20 Hz, then good ones
+"""
+
+import json
+import sys
+import time
+from dataclasses import dataclass
+
+from cyclonedds.core import Policy, Qos
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.idl import IdlStruct
+from cyclonedds.idl.types import int8, int32, uint32
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+import equiarm_idl as idl
+import golden
+
+# rclpy's default profile (what `create_subscription(Msg, topic, 10)` uses) and the sensor-data profile.
+RCLPY_DEFAULT = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.Volatile,
+                    Policy.History.KeepLast(10), Policy.DataRepresentation(use_cdrv0_representation=True))
+SENSOR_DATA = Qos(Policy.Reliability.BestEffort, Policy.Durability.Volatile, Policy.History.KeepLast(5),
+                  Policy.DataRepresentation(use_cdrv0_representation=True))
+
+# topic -> (type, QoS, golden case the Rust side publishes on it)
+RECEIVE = {
+    "rt/interop/color/image_raw": (idl.Image, SENSOR_DATA, "Image.rgb8"),
+    "rt/interop/depth/image_raw": (idl.Image, SENSOR_DATA, "Image.depth"),
+    "rt/interop/observation": (idl.Observation, RCLPY_DEFAULT, "Observation.special"),
+}
+
+
+def emit(**kw):
+    print(json.dumps(kw), flush=True)
+
+
+def receive(domain: int, seconds: float):
+    dp = DomainParticipant(domain)
+    cases = golden.cases()
+    readers = {name: DataReader(dp, Topic(dp, name, cls), qos=qos) for name, (cls, qos, _) in RECEIVE.items()}
+    got = {name: 0 for name in RECEIVE}
+    deadline = time.monotonic() + seconds
+    emit(event="ready")
+    while time.monotonic() < deadline and min(got.values()) < 3:
+        idle = True
+        for name, reader in readers.items():
+            for sample in reader.take(N=10):
+                if not hasattr(sample, "__dataclass_fields__"):
+                    continue  # an InvalidSample (state change), not data
+                idle = False
+                errors = []
+                golden.same(cases[RECEIVE[name][2]], sample, name, errors)
+                got[name] += 1
+                emit(event="sample", topic=name, exact=not errors, errors=errors[:5])
+        if idle:
+            time.sleep(0.01)
+    emit(event="done", counts=got)
+
+
+def send(domain: int, seconds: float):
+    dp = DomainParticipant(domain)
+    writer = DataWriter(dp, Topic(dp, "rt/interop/gripper_cmd", idl.GripperCommand), qos=RCLPY_DEFAULT)
+    cases = [golden.command_special(), golden.command_typical()]
+    deadline = time.monotonic() + seconds
+    n = 0
+    while time.monotonic() < deadline and n < int(seconds * 20):
+        writer.write(cases[n % 2])
+        n += 1
+        time.sleep(0.05)
+    emit(event="sent", count=n)
+
+
+@dataclass
+class Truncated(IdlStruct, typename="equiarm_msgs::msg::dds_::GripperCommand_"):
+    """One byte where a GripperCommand needs at least 45."""
+    x: int8 = 0
+
+
+@dataclass
+class HugeString(IdlStruct, typename="equiarm_msgs::msg::dds_::GripperCommand_"):
+    """A header whose frame_id claims 4 GB: the wrong layout for GripperCommand."""
+    sec: int32 = 0
+    nanosec: uint32 = 0
+    frame_id_len: uint32 = 0xFFFFFF00
+
+
+def send_bad(domain: int, seconds: float):
+    """Bad payloads first (two kinds, separate participants since the types clash), then good ones."""
+    bad = []
+    for cls, value in ((Truncated, Truncated(x=7)), (HugeString, HugeString())):
+        dp = DomainParticipant(domain)
+        bad.append((DataWriter(dp, Topic(dp, "rt/interop/bad_cmd", cls), qos=RCLPY_DEFAULT), value))
+    good_dp = DomainParticipant(domain)
+    good = DataWriter(good_dp, Topic(good_dp, "rt/interop/bad_cmd", idl.GripperCommand), qos=RCLPY_DEFAULT)
+    deadline = time.monotonic() + seconds
+    # wait (bounded) until the Rust reader has matched every writer, so reliable delivery applies
+    while time.monotonic() < deadline:
+        if all(w.get_matched_subscriptions() for w, _ in bad) and good.get_matched_subscriptions():
+            break
+        time.sleep(0.05)
+    time.sleep(0.3)
+    n_bad = n_good = 0
+    for _ in range(3):
+        for w, v in bad:
+            w.write(v)
+            n_bad += 1
+        time.sleep(0.05)
+    while time.monotonic() < deadline and n_good < 20:
+        good.write(golden.command_typical())
+        n_good += 1
+        time.sleep(0.05)
+    emit(event="sent", bad=n_bad, good=n_good)
+
+
+if __name__ == "__main__":
+    mode, domain, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+    {"receive": receive, "send": send, "send-bad": send_bad}[mode](domain, seconds)
