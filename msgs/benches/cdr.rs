@@ -1,0 +1,91 @@
+//! Benchmark: CDR encode + decode of a 152x152 RGBD `Observation` (rgb8 colour + 32FC1 depth, what the
+//! simulator publishes every step), in MB/s (median of runs), beside the same decode and encode in
+//! Cyclone DDS Python (the rclpy/rmw_cyclonedds peer), measured in the same run.
+//!
+//! Run with `bash bench/cdr.sh` (sets up the Python peer), or `cargo bench -p equiarm_msgs --bench cdr`
+//! with `EQUIARM_PYTHON` pointing at a Python that has `cyclonedds` (else only the Rust side runs).
+
+use equiarm_msgs::msg::{GripperCommand, Observation};
+use equiarm_msgs::sensor_msgs::Image;
+use equiarm_msgs::std_msgs::Header;
+use equiarm_msgs::{builtin_interfaces::Time, cdr};
+use std::hint::black_box;
+use std::time::Instant;
+
+const SIDE: u32 = 152;
+const ROUNDS: usize = 15;
+const ITERS: usize = 200;
+
+fn observation() -> Observation {
+    let header = Header::new(Time { sec: 12, nanosec: 345 }, "world");
+    let n = (SIDE * SIDE) as usize;
+    let color: Vec<u8> = (0..n * 3).map(|i| (i * 7 % 251) as u8).collect();
+    let depth: Vec<f32> = (0..n).map(|i| 0.5 + (i % 1000) as f32 * 1e-4).collect();
+    Observation {
+        header: header.clone(),
+        seq: 1,
+        env: "env0".into(),
+        episode: 0,
+        step: 0,
+        color: Image::rgb8(header.clone(), SIDE, SIDE, color).unwrap(),
+        depth: Image::float32(header.clone(), SIDE, SIDE, &depth).unwrap(),
+        holding: false,
+        expert_action: GripperCommand { header, obs_seq: 1, open_ratio: 1.0, ..Default::default() },
+    }
+}
+
+/// Median over rounds of MB/s for `ITERS` calls of `f` on `bytes` bytes each.
+fn median_mbps(bytes: usize, mut f: impl FnMut()) -> f64 {
+    for _ in 0..ITERS / 4 {
+        f();
+    }
+    let mut rates: Vec<f64> = (0..ROUNDS)
+        .map(|_| {
+            let t = Instant::now();
+            for _ in 0..ITERS {
+                f();
+            }
+            (bytes * ITERS) as f64 / t.elapsed().as_secs_f64() / 1e6
+        })
+        .collect();
+    rates.sort_by(|a, b| a.total_cmp(b));
+    rates[ROUNDS / 2]
+}
+
+fn main() {
+    let obs = observation();
+    let bytes = cdr::encode(&obs).unwrap();
+    let n = bytes.len();
+    let mut buf = Vec::with_capacity(n);
+    let enc = median_mbps(n, || {
+        buf.clear();
+        cdr::encode_into(black_box(&obs), &mut buf).unwrap();
+        black_box(&buf);
+    });
+    let dec = median_mbps(n, || {
+        black_box(cdr::decode::<Observation>(black_box(&bytes)).unwrap());
+    });
+    println!("CDR of a {SIDE}x{SIDE} RGBD Observation ({n} bytes), median of {ROUNDS} rounds x {ITERS}:");
+    println!("{:<34} {:>12} {:>12}", "implementation", "encode MB/s", "decode MB/s");
+    println!("{:<34} {:>12.0} {:>12.0}", "equiarm_msgs (Rust, cdr-encoding)", enc, dec);
+
+    let Some(python) = std::env::var_os("EQUIARM_PYTHON") else {
+        println!("(set EQUIARM_PYTHON, or run bash bench/cdr.sh, for the Cyclone DDS Python peer)");
+        return;
+    };
+    let path = std::env::temp_dir().join(format!("equiarm_bench_obs_{}.cdr", std::process::id()));
+    std::fs::write(&path, &bytes).unwrap();
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/../bench/cdr_peer.py");
+    let out = std::process::Command::new(python).arg(script).arg(&path).arg(ROUNDS.to_string()).output();
+    let _ = std::fs::remove_file(&path);
+    let out = out.expect("running bench/cdr_peer.py");
+    if !out.status.success() {
+        eprintln!("{}", String::from_utf8_lossy(&out.stderr));
+        panic!("bench/cdr_peer.py failed");
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    let mut peer = text.split_whitespace().map(|v| v.parse::<f64>().unwrap());
+    let (penc, pdec) = (peer.next().unwrap(), peer.next().unwrap());
+    println!("{:<34} {:>12.0} {:>12.0}", "Cyclone DDS Python 11.0.1 (bytes)", penc, pdec);
+    println!("{:<34} {:>11.1}x {:>11.1}x", "ratio Rust / Python", enc / penc, dec / pdec);
+}
