@@ -4,6 +4,8 @@
 use anyhow::{Context as _, bail};
 use clap::{Parser, Subcommand};
 use equiarm_msgs::{ALL_TYPES, TypeInfo};
+use equiarm_nodes::echo::{QosChoice, echo};
+use equiarm_nodes::ros::RosOptions;
 
 #[derive(Parser)]
 #[command(name = "equiarm", version, about = "ROS 2 node suite for robot learning with equivariant models")]
@@ -17,6 +19,27 @@ enum Command {
     /// Message types: list them, or show one's definition (like `ros2 interface`).
     #[command(subcommand)]
     Msg(MsgCommand),
+    /// Topics: print a topic's messages.
+    #[command(subcommand)]
+    Topic(TopicCommand),
+}
+
+#[derive(Subcommand)]
+enum TopicCommand {
+    /// Prints each message of a topic as one JSON line (long arrays summarised) until Ctrl-C.
+    Echo {
+        /// Topic name, e.g. `/env0/observation`.
+        topic: String,
+        /// Message type, e.g. `equiarm_msgs/msg/GripperCommand` (see `equiarm msg list`).
+        #[arg(long = "type", short = 't')]
+        type_name: String,
+        /// Stop after this many messages.
+        #[arg(long)]
+        count: Option<u64>,
+        /// QoS to subscribe with (must be compatible with the publisher's).
+        #[arg(long, value_enum, default_value = "reliable")]
+        qos: QosChoice,
+    },
 }
 
 #[derive(Subcommand)]
@@ -59,8 +82,21 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let text = if raw { own_text(t).context("splitting the definition")? } else { t.definition };
             print!("{text}");
         }
+        Command::Topic(TopicCommand::Echo { topic, type_name, count, qos }) => {
+            let opts = RosOptions::from_env()?;
+            let rt = runtime()?;
+            let n = equiarm_nodes::with_message_type!(&type_name, M => {
+                rt.block_on(echo::<M>(&opts, &topic, qos, count, std::io::stdout().lock()))
+            })??;
+            log::info!("printed {n} messages from {topic}");
+        }
     }
     Ok(())
+}
+
+/// The multi-threaded tokio runtime every node runs on.
+fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread().enable_all().build().context("starting the tokio runtime")
 }
 
 /// The root type's own text: everything before the first nested definition.

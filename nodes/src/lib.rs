@@ -3,3 +3,4 @@
 //! [`ros`] is the only module that talks to ros2-client; each node maps topics to library calls.
 
 pub mod ros;
+pub mod echo;

@@ -1,0 +1,108 @@
+//! The `equiarm` program as a user runs it: message tools, `topic echo` over DDS, and clean shutdown
+//! of a node on SIGTERM and SIGINT.
+
+mod support;
+
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use equiarm_msgs::RosMessage;
+use equiarm_msgs::msg::{GripperCommand, Observation};
+use equiarm_nodes::ros::{RosNode, RosOptions, qos};
+use support::golden_values::*;
+
+fn equiarm() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_equiarm"))
+}
+
+#[test]
+fn msg_show_prints_the_full_definition_and_rejects_unknown_types() {
+    let out = equiarm().args(["msg", "show", "equiarm_msgs/Observation"]).output().unwrap();
+    assert!(out.status.success());
+    assert_eq!(String::from_utf8(out.stdout).unwrap(), Observation::DEFINITION);
+    let out = equiarm().args(["msg", "show", "--raw", "equiarm_msgs/msg/GripperCommand"]).output().unwrap();
+    assert_eq!(String::from_utf8(out.stdout).unwrap(), GripperCommand::MSG_TEXT);
+    let out = equiarm().args(["msg", "show", "nope/Nope"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert!(err.contains("unknown message type 'nope/Nope'"), "{err}");
+    let out = equiarm().args(["msg", "list"]).output().unwrap();
+    assert_eq!(String::from_utf8(out.stdout).unwrap().lines().count(), equiarm_msgs::ALL_TYPES.len());
+}
+
+fn echo_then_signal(domain: u16, signal: &str) {
+    let mut child = equiarm()
+        .args(["topic", "echo", "/cli/gripper_cmd", "--type", GripperCommand::TYPE_NAME])
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stdout = child.stdout.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines() {
+            if tx.send(line.unwrap()).is_err() {
+                break;
+            }
+        }
+    });
+
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let line = rt.block_on(async {
+        let mut node = RosNode::new("/", "cli_pub", &RosOptions { domain_id: domain, localhost_only: false }).unwrap();
+        let publ = node.publisher::<GripperCommand>("/cli/gripper_cmd", qos::command()).unwrap();
+        let start = Instant::now();
+        loop {
+            assert!(start.elapsed() < Duration::from_secs(20), "equiarm topic echo printed nothing");
+            publ.publish(command_typical()).await.unwrap();
+            tokio::time::sleep(Duration::from_millis(100)).await;
+            if let Ok(line) = rx.try_recv() {
+                break line;
+            }
+        }
+    });
+    let v: serde_json::Value = serde_json::from_str(&line).unwrap();
+    assert_eq!(v["obs_seq"], 42);
+    assert_eq!(v["dx"], 0.03125);
+    assert_eq!(v["source"], GripperCommand::SOURCE_EXPERT);
+    assert_eq!(v["header"]["frame_id"], "world");
+
+    let status = Command::new("kill").args([&format!("-{signal}"), &child.id().to_string()]).status().unwrap();
+    assert!(status.success());
+    let start = Instant::now();
+    let exit = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(start.elapsed() < Duration::from_secs(10), "no exit within 10 s of SIG{signal}");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    assert!(exit.success(), "exit {exit} after SIG{signal}:\n{err}");
+    assert!(err.contains(&format!("SIG{signal} received, shutting down")), "{err}");
+}
+
+#[test]
+fn topic_echo_prints_messages_and_exits_cleanly_on_sigterm() {
+    echo_then_signal(75, "TERM");
+}
+
+#[test]
+fn topic_echo_exits_cleanly_on_sigint() {
+    echo_then_signal(76, "INT");
+}
+
+#[test]
+fn a_bad_ros_domain_id_is_an_error_naming_the_variable() {
+    let out = equiarm()
+        .args(["topic", "echo", "/x", "--type", "std_msgs/Header", "--count", "1"])
+        .env("ROS_DOMAIN_ID", "999")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert!(err.contains("ROS_DOMAIN_ID='999'"), "{err}");
+}
