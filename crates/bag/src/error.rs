@@ -1,0 +1,47 @@
+//! The bag crate's error: every variant names the file (or directory) it is about.
+
+use std::path::PathBuf;
+
+/// What went wrong with a bag, and where.
+#[derive(Debug, thiserror::Error)]
+pub enum BagError {
+    /// Reading or writing the file system failed.
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    /// rosbag2 never records into an existing directory; neither do we.
+    #[error("{path}: already exists and is not empty (a bag is written into a new directory)")]
+    Exists { path: PathBuf },
+    /// The path holds no MCAP files.
+    #[error("{path}: no MCAP files (expected NAME_0.mcap, NAME_1.mcap, ... or a .mcap file)")]
+    NoFiles { path: PathBuf },
+    /// The file is empty.
+    #[error("{path}: empty file, not an MCAP bag")]
+    Empty { path: PathBuf },
+    /// The file does not start with the MCAP magic bytes.
+    #[error("{path}: not an MCAP file (no MCAP magic at the start)")]
+    NotMcap { path: PathBuf },
+    /// The file ends before its footer (a recorder that was killed) and the read was strict.
+    #[error("{path}: truncated after {messages} readable messages ({reason}); `equiarm bag recover` rewrites it whole")]
+    Truncated { path: PathBuf, messages: u64, reason: String },
+    /// The MCAP structure is damaged.
+    #[error("{path}: damaged MCAP data after {messages} messages: {source}")]
+    Mcap { path: PathBuf, messages: u64, source: mcap::McapError },
+    /// Writing MCAP records failed.
+    #[error("{path}: writing MCAP: {source}")]
+    Write { path: PathBuf, source: mcap::McapError },
+    /// A message refers to a topic id this writer never handed out, or similar misuse.
+    #[error("{path}: {what}")]
+    Usage { path: PathBuf, what: String },
+}
+
+impl BagError {
+    pub(crate) fn io(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> BagError {
+        let path = path.into();
+        move |source| BagError::Io { path, source }
+    }
+
+    pub(crate) fn write(path: impl Into<PathBuf>) -> impl FnOnce(mcap::McapError) -> BagError {
+        let path = path.into();
+        move |source| BagError::Write { path, source }
+    }
+}
