@@ -17,6 +17,12 @@ fn main() -> Result<(), equiarm_sim::SimError> {
         }
         let mut cfg = EnvConfig::new(task);
         cfg.render = false;
+        if let Some(v) = std::env::var("SUBSTEPS").ok().and_then(|v| v.parse().ok()) {
+            cfg.params.substeps = v;
+        }
+        if let Some(v) = std::env::var("DT_HZ").ok().and_then(|v| v.parse::<f32>().ok()) {
+            cfg.params.dt = 1.0 / v;
+        }
         let mut env = Env::new(cfg)?;
         let (mut ok, mut steps) = (0u64, 0u64);
         let mut failed = Vec::new();

@@ -4,7 +4,8 @@
 //!
 //! Action semantics (PAPER_SPEC §3.2): the delta is clipped to ±0.05 m / ±π/4, the target TCP is
 //! clamped to the workspace box, yaw is neither clipped nor wrapped, and the palm moves linearly over
-//! the substeps. Holding (§3.2 item 4): an object counts as held when both fingers touch it with
+//! the substeps; then the finger motors get the new open ratio (and, if it changed, a few more
+//! substeps to close or open), as BulletArm moves the arm before it drives the gripper. Holding (§3.2 item 4): an object counts as held when both fingers touch it with
 //! contact normals that are mostly horizontal (|n_z| < 0.3).
 //!
 //! Limitations: the palm is kinematic, so it pushes dynamic objects with unlimited force and passes
@@ -173,7 +174,6 @@ impl Gripper {
     /// the substeps, then settle.
     pub fn apply(&mut self, scene: &mut Scene, action: Action) {
         let a = action.clipped();
-        self.command_fingers(scene, a.open_ratio);
         let start = self.tcp;
         let target = Vector::new(
             (start.x + a.dx).clamp(WORKSPACE[0][0], WORKSPACE[0][1]),
@@ -192,7 +192,12 @@ impl Gripper {
         }
         self.tcp = target;
         self.yaw = yaw1;
-        for _ in 0..scene.params.settle_substeps {
+        // As BulletArm's step: move first, then drive the fingers (with extra substeps only when the
+        // jaw command changes, so a grasp closes where the arm arrived, not on the way down).
+        let changed = (a.open_ratio - self.open_target).abs() > 1e-4;
+        self.command_fingers(scene, a.open_ratio);
+        let grip_steps = if changed { scene.params.grip_substeps } else { 0 };
+        for _ in 0..scene.params.settle_substeps + grip_steps {
             scene.physics.bodies[self.palm].set_next_kinematic_position(palm_pose(target, yaw1));
             scene.step();
         }

@@ -77,6 +77,8 @@ pub struct TaskState {
     pub goal: Option<[f32; 2]>,
     /// Planner waypoint index.
     pub stage: usize,
+    /// Yaw kept fixed during a contact stage (pulling and pushing sweep with a fixed yaw).
+    pub locked_yaw: Option<f32>,
 }
 
 fn sample_xy(rng: &mut Rng, padding: f32, min_dist: f32, others: &[[f32; 2]]) -> [f32; 2] {
@@ -163,7 +165,7 @@ impl TaskState {
                 bodies.push(h.links[0].body);
             }
         }
-        Ok(Self { kind, bodies, goal, stage: 0 })
+        Ok(Self { kind, bodies, goal, stage: 0, locked_yaw: None })
     }
 
     fn xy(scene: &Scene, b: RigidBodyHandle) -> [f32; 2] {
@@ -304,9 +306,25 @@ impl TaskState {
     }
 
     /// Waypoint following: (position, p while moving, p on the arrival step). Cycles.
+    ///
+    /// NOTE: for pulling and pushing, the yaw is frozen during the last (sweeping) stage at the value
+    /// it had when the stage began. Re-planning the yaw from the moving block every step (as the
+    /// waypoint positions are) turned the gripper while it was in contact and flung the block.
     fn follow(&mut self, gripper: &Gripper, wps: &[(Vector, f32, f32)], yaw: f32) -> Action {
         let stage = self.stage % wps.len();
         let (pos, p_move, p_arrive) = wps[stage];
+        let sweeping = matches!(self.kind, TaskKind::BlockPulling | TaskKind::BlockPushing) && stage + 1 == wps.len();
+        let yaw = match (sweeping, self.locked_yaw) {
+            (true, Some(y)) => y,
+            (true, None) => {
+                self.locked_yaw = Some(gripper.yaw);
+                gripper.yaw
+            }
+            (false, _) => {
+                self.locked_yaw = None;
+                yaw
+            }
+        };
         let (a, reached) = toward(gripper, clip_to_workspace(pos), yaw);
         if reached {
             self.stage = (stage + 1) % wps.len();

@@ -22,6 +22,8 @@ pub struct SimParams {
     pub substeps: u32,
     /// Extra physics steps after the motion, with the palm still, so objects settle.
     pub settle_substeps: u32,
+    /// Extra physics steps after the motion when the jaw command changed (the fingers close or open).
+    pub grip_substeps: u32,
     /// Physics steps run at reset so spawned objects settle (BulletArm: 50 steps at 1/240 s).
     pub reset_settle_substeps: u32,
     pub solver_iterations: usize,
@@ -51,8 +53,9 @@ impl Default for SimParams {
     fn default() -> Self {
         Self {
             dt: 1.0 / 120.0,
-            substeps: 12,
+            substeps: 20,
             settle_substeps: 2,
+            grip_substeps: 8,
             reset_settle_substeps: 25,
             solver_iterations: 4,
             prediction_distance: 0.002,
