@@ -115,31 +115,37 @@ impl Gripper {
         let friction = scene.params.finger_friction;
         let h: UrdfRobotHandles<ImpulseJointHandle> =
             scene.insert(asset, "gripper", palm_pose(tcp, yaw), false, friction)?;
-        let robot = &asset.robot;
-        let _ = robot;
-        // Map URDF indices to inserted handles (link order is preserved unless empty links are squeezed).
+        // Inserted links keep the URDF order (no link of the gripper is an empty frame to squeeze).
         let link_of = |urdf_index: usize| -> Result<&rapier3d_urdf::UrdfLinkHandle> {
-            h.links
-                .iter()
-                .zip(0..)
-                .find(|(_, k)| *k == urdf_index)
-                .map(|(l, _)| l)
-                .ok_or_else(|| crate::error::SimError::UrdfInvalid {
-                    file: asset.file.clone(),
-                    element: format!("link #{urdf_index}"),
-                    message: "was not turned into a rigid body (has it a collision shape?)".into(),
-                })
+            h.links.get(urdf_index).ok_or_else(|| crate::error::SimError::UrdfInvalid {
+                file: asset.file.clone(),
+                element: format!("link `{}`", asset.robot.links[urdf_index].name),
+                message: "was not turned into a rigid body".into(),
+            })
         };
         let palm = link_of(palm_i)?.body;
         let left = link_of(li)?;
         let right = link_of(ri)?;
-        let joint_of = |urdf_index: usize| h.joints[urdf_index].joint;
-        let finger_colliders = [left.colliders[0].handle, right.colliders[0].handle];
-        let g = Self {
+        let joint_of = |urdf_index: usize| {
+            h.joints.get(urdf_index).map(|j| j.joint).ok_or_else(|| crate::error::SimError::UrdfInvalid {
+                file: asset.file.clone(),
+                element: format!("joint `{}`", asset.robot.joints[urdf_index].name),
+                message: "was not turned into a rapier joint".into(),
+            })
+        };
+        let first_collider = |l: &rapier3d_urdf::UrdfLinkHandle, i: usize| {
+            l.colliders.first().map(|c| c.handle).ok_or_else(|| crate::error::SimError::UrdfInvalid {
+                file: asset.file.clone(),
+                element: format!("link `{}`", asset.robot.links[i].name),
+                message: "a finger needs a <collision> shape".into(),
+            })
+        };
+        let finger_colliders = [first_collider(left, li)?, first_collider(right, ri)?];
+        let mut g = Self {
             palm,
             fingers: [left.body, right.body],
             finger_colliders,
-            finger_joints: [joint_of(lj), joint_of(rj)],
+            finger_joints: [joint_of(lj)?, joint_of(rj)?],
             tcp,
             yaw,
             open_target: open_ratio,
@@ -154,7 +160,6 @@ impl Gripper {
                 joint.data.set_motor_max_force(JointAxis::LinX, p.grip_max_force);
             }
         }
-        let mut g = g;
         g.command_fingers(scene, open_ratio);
         Ok(g)
     }

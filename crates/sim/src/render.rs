@@ -46,6 +46,32 @@ impl Frame {
     }
 }
 
+impl Frame {
+    /// The `size`×`size` window whose top-left pixel is (row0, col0) (PAPER_SPEC §1.1: random crops
+    /// of 128 from 152 in training, the centre crop (12, 12) when acting). `None` if it does not fit.
+    pub fn crop(&self, row0: usize, col0: usize, size: usize) -> Option<Frame> {
+        if row0 + size > self.height || col0 + size > self.width {
+            return None;
+        }
+        let mut out = Frame::new(size, size, 0.0);
+        for r in 0..size {
+            let src = (row0 + r) * self.width + col0;
+            out.depth[r * size..(r + 1) * size].copy_from_slice(&self.depth[src..src + size]);
+            out.segmentation[r * size..(r + 1) * size].copy_from_slice(&self.segmentation[src..src + size]);
+            out.color[r * size * 3..(r + 1) * size * 3].copy_from_slice(&self.color[src * 3..(src + size) * 3]);
+        }
+        Some(out)
+    }
+
+    /// The centred `size`×`size` crop.
+    pub fn center_crop(&self, size: usize) -> Option<Frame> {
+        if size > self.width || size > self.height {
+            return None;
+        }
+        self.crop((self.height - size) / 2, (self.width - size) / 2, size)
+    }
+}
+
 /// Background colour (rgb8).
 pub const BACKGROUND: [u8; 3] = [170, 180, 190];
 const AMBIENT: f32 = 0.35;
@@ -332,4 +358,27 @@ pub fn agreement(a: &Frame, b: &Frame) -> (f64, f32) {
         }
     }
     (same as f64 / a.segmentation.len() as f64, max_dz)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crop_takes_the_window() {
+        let mut f = Frame::new(4, 3, 1.0);
+        for i in 0..12 {
+            f.depth[i] = i as f32;
+            f.segmentation[i] = i as u16;
+            f.color[i * 3] = i as u8;
+        }
+        let c = f.crop(1, 2, 2).unwrap();
+        assert_eq!(c.segmentation, vec![6, 7, 10, 11]);
+        assert_eq!(c.depth, vec![6.0, 7.0, 10.0, 11.0]);
+        assert_eq!(c.color[3], 7);
+        assert!(f.crop(2, 0, 2).is_none());
+        let big = Frame::new(152, 152, 1.0);
+        let cc = big.center_crop(128).unwrap();
+        assert_eq!((cc.width, cc.height), (128, 128));
+    }
 }

@@ -141,12 +141,17 @@ impl TaskState {
                 let centre = [0.45 + c * a - s * b, c * b + s * a];
                 let asset = assets.get(AssetKind::Drawer);
                 let h = scene.insert(asset, "drawer", pose_xy(centre, 0.0, yaw), true, fr)?;
+                let missing = |element: String| crate::error::SimError::UrdfInvalid {
+                    file: asset.file.clone(),
+                    element,
+                    message: "was not turned into a rapier body or joint".into(),
+                };
                 for name in ["cabinet", "drawer", "handle"] {
                     let i = asset.link_index(name)?;
-                    bodies.push(h.links[i].body);
+                    bodies.push(h.links.get(i).ok_or_else(|| missing(format!("link `{name}`")))?.body);
                 }
                 let j = asset.joint_index("drawer_joint")?;
-                let joint = h.joints[j].joint;
+                let joint = h.joints.get(j).ok_or_else(|| missing("joint `drawer_joint`".into()))?.joint;
                 let resist = scene.params.drawer_resistance;
                 if let Some(jt) = scene.physics.impulse_joints.get_mut(joint, true) {
                     jt.data.set_motor_model(JointAxis::LinX, MotorModel::ForceBased);
