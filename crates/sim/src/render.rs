@@ -87,9 +87,22 @@ fn shade(color: [f32; 3], normal: Vector) -> [u8; 3] {
     color.map(|c| (c * k * 255.0).round().clamp(0.0, 255.0) as u8)
 }
 
-fn checker_color(color: [f32; 3], p: Vector) -> [f32; 3] {
+const CHECKER_DARK: [f32; 3] = [0.35, 0.45, 0.85];
+
+fn checker_odd(p: Vector) -> bool {
     let i = (p.x / CHECKER_TILE).floor() as i64 + (p.y / CHECKER_TILE).floor() as i64;
-    if i.rem_euclid(2) == 0 { color } else { [0.35, 0.45, 0.85] }
+    i.rem_euclid(2) == 1
+}
+
+fn checker_color(color: [f32; 3], p: Vector) -> [f32; 3] {
+    if checker_odd(p) { CHECKER_DARK } else { color }
+}
+
+/// How a triangle is painted: one flat colour, or the checkerboard's two shaded colours.
+#[derive(Clone, Copy)]
+enum Paint {
+    Flat([u8; 3]),
+    Checker([u8; 3], [u8; 3]),
 }
 
 /// Triangles of every visual collider in its local frame, built once per scene.
@@ -102,6 +115,9 @@ struct MeshItem {
     seg: u16,
     color: [f32; 3],
     checker: bool,
+    /// A convex solid centred on the collider origin (box, cylinder, ball, capsule): faces that look
+    /// away from the camera are culled.
+    convex_centred: bool,
     vertices: Vec<Vector>,
     triangles: Vec<[u32; 3]>,
 }
@@ -112,6 +128,10 @@ impl MeshCache {
         for v in &scene.visuals {
             let Some(col) = scene.physics.colliders.get(v.collider) else { continue };
             let shape = col.shape();
+            let convex_centred = shape.as_cuboid().is_some()
+                || shape.as_cylinder().is_some()
+                || shape.as_ball().is_some()
+                || shape.as_capsule().is_some();
             let mesh = if let Some(c) = shape.as_cuboid() {
                 Some(c.to_trimesh())
             } else if let Some(c) = shape.as_cylinder() {
@@ -129,6 +149,7 @@ impl MeshCache {
                     seg: v.seg,
                     color: v.color,
                     checker: v.checker,
+                    convex_centred,
                     vertices,
                     triangles,
                 });
@@ -199,8 +220,19 @@ pub fn rasterize(scene: &Scene, meshes: &MeshCache, cam: &Camera, frame: &mut Fr
         let pose = *col.position();
         world.clear();
         world.extend(item.vertices.iter().map(|v| pose * *v));
+        let centre = pose.translation;
         for t in &item.triangles {
             let w = [world[t[0] as usize], world[t[1] as usize], world[t[2] as usize]];
+            if item.convex_centred {
+                // Back-face culling: the outward normal points away from the centre.
+                let mut n = (w[1] - w[0]).cross(w[2] - w[0]);
+                if n.dot(w[0] - centre) < 0.0 {
+                    n = -n;
+                }
+                if n.dot(c.eye - w[0]) <= 0.0 {
+                    continue;
+                }
+            }
             draw_triangle(&c, item, w, frame);
         }
     }
@@ -216,7 +248,11 @@ fn draw_triangle(c: &Cam32, item: &MeshItem, w: [Vector; 3], frame: &mut Frame) 
     if n.dot(c.eye - w[0]) < 0.0 {
         n = -n;
     }
-    let flat = if item.checker { None } else { Some(shade(item.color, n)) };
+    let paint = if item.checker {
+        Paint::Checker(shade(item.color, n), shade(CHECKER_DARK, n))
+    } else {
+        Paint::Flat(shade(item.color, n))
+    };
     let o = w.map(|p| c.to_optical(p));
     // Plane in optical coordinates: n_c · x = d; along the pixel ray x = z·(x̂, ŷ, 1).
     let n_c = Vector::new(c.r[0].dot(n), c.r[1].dot(n), c.r[2].dot(n));
@@ -245,15 +281,15 @@ fn draw_triangle(c: &Cam32, item: &MeshItem, w: [Vector; 3], frame: &mut Frame) 
     let proj = |p: Vector| [c.fx * p.x / p.z + c.cx, c.fy * p.y / p.z + c.cy];
     let pts: Vec<[f32; 2]> = poly[..np].iter().map(|p| proj(*p)).collect();
     for k in 1..np - 1 {
-        raster_2d(c, item, flat, n_c, d, [pts[0], pts[k], pts[k + 1]], frame);
+        raster_2d(c, item.seg, paint, n_c, d, [pts[0], pts[k], pts[k + 1]], frame);
     }
 }
 
 #[allow(clippy::too_many_arguments)]
 fn raster_2d(
     c: &Cam32,
-    item: &MeshItem,
-    flat: Option<[u8; 3]>,
+    seg: u16,
+    paint: Paint,
     n_c: Vector,
     d: f32,
     p: [[f32; 2]; 3],
@@ -296,13 +332,12 @@ fn raster_2d(
             let i = row * c.w + col;
             if z < frame.depth[i] {
                 frame.depth[i] = z;
-                frame.segmentation[i] = item.seg;
-                let rgb = match flat {
-                    Some(rgb) => rgb,
-                    None => {
+                frame.segmentation[i] = seg;
+                let rgb = match paint {
+                    Paint::Flat(rgb) => rgb,
+                    Paint::Checker(light, dark) => {
                         let pw = c.eye + c.to_world_dir(Vector::new(xh * z, yh * z, z));
-                        let n_w = c.to_world_dir(n_c);
-                        shade(checker_color(item.color, pw), n_w)
+                        if checker_odd(pw) { dark } else { light }
                     }
                 };
                 frame.color[i * 3..i * 3 + 3].copy_from_slice(&rgb);
