@@ -12,7 +12,7 @@ use std::path::PathBuf;
 use std::process::Command;
 use std::time::Instant;
 
-use equiarm_sim::{Env, EnvConfig, TaskKind};
+use equiarm_sim::{Action, Env, EnvConfig, TaskKind, VecEnv};
 
 fn pct(xs: &mut [f64], q: f64) -> f64 {
     xs.sort_by(|a, b| a.total_cmp(b));
@@ -116,6 +116,25 @@ fn main() {
     }
     let our_med = pct(&mut all, 0.5);
     println!("{:<16} {:>12.3} {:>10.3}", "all tasks", our_med, pct(&mut all, 0.95));
+
+    // Throughput of VecEnv (one rayon task per env), block picking, expert actions, images on.
+    let n_envs = get("--envs").and_then(|s| s.parse().ok()).unwrap_or(8usize);
+    let mut venv = VecEnv::new(EnvConfig::new(TaskKind::BlockPicking), n_envs).expect("vec env");
+    let seeds: Vec<u64> = (0..n_envs as u64).collect();
+    let mut obs = venv.reset(&seeds).expect("reset");
+    let vec_steps = 100;
+    let t = Instant::now();
+    for _ in 0..vec_steps {
+        let actions: Vec<Action> = obs.iter().map(|o| o.expert_action).collect();
+        obs = venv.step(&actions).expect("step").into_iter().map(|r| r.observation).collect();
+    }
+    let secs = t.elapsed().as_secs_f64();
+    println!(
+        "VecEnv {n_envs} envs x {vec_steps} steps on {} rayon threads: {:.0} env steps/s (single env at the median: {:.0}/s)",
+        rayon::current_num_threads(),
+        (n_envs * vec_steps) as f64 / secs,
+        1e3 / our_med
+    );
     if !peers.is_empty() {
         println!("\nPyBullet BulletArm-like peer (Kuka + IK + 2x getCameraImage 152 px, TinyRenderer), same run:");
         for mode in ["fixed", "bulletarm"] {
