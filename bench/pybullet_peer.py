@@ -16,6 +16,10 @@ What one step does (as BulletArm's CloseLoopEnv.step with a Kuka, PAPER_SPEC sec
 --mode fixed (a conservative lower bound of the above, as in SIM_NOTES): one IK solve, the finger
 command, and exactly 100 physics steps; then the same two renders.
 
+--mode floating (the cheapest PyBullet step we could call BulletArm-like): no arm; the repository's
+urdf/gripper.urdf driven by a fixed constraint moved linearly over 24 physics steps at the paper's dt
+(1/240 s, 50 solver iterations), fingers position-controlled; then the same two renders.
+
 Prints one JSON line: {"steps", "median_ms", "p95_ms", "physics_median_ms", "render_median_ms"}.
 
     pip install pybullet numpy
@@ -39,7 +43,7 @@ def main():
     ap.add_argument("--steps", type=int, default=200)
     ap.add_argument("--size", type=int, default=152)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--mode", choices=["bulletarm", "fixed"], default="bulletarm")
+    ap.add_argument("--mode", choices=["bulletarm", "fixed", "floating"], default="bulletarm")
     args = ap.parse_args()
     rng = random.Random(args.seed)
 
@@ -49,9 +53,14 @@ def main():
     p.setPhysicsEngineParameter(numSolverIterations=50, numSubSteps=0)
     p.setGravity(0, 0, -10)
     p.loadURDF("plane.urdf")
-    kuka = p.loadSDF("kuka_iiwa/kuka_with_gripper2.sdf")[0]
-    p.resetBasePositionAndOrientation(kuka, [-0.2, 0, 0], [0, 0, 0, 1])
     urdf_dir = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "urdf")
+    if args.mode == "floating":
+        gripper = p.loadURDF(os.path.join(urdf_dir, "gripper.urdf"), [0.45, 0, 0.255])
+        cid = p.createConstraint(gripper, -1, -1, -1, p.JOINT_FIXED, [0, 0, 0], [0, 0, 0], [0.45, 0, 0.255])
+        kuka = None
+    else:
+        kuka = p.loadSDF("kuka_iiwa/kuka_with_gripper2.sdf")[0]
+        p.resetBasePositionAndOrientation(kuka, [-0.2, 0, 0], [0, 0, 0, 1])
     p.loadURDF(os.path.join(urdf_dir, "cube.urdf"), [0.5, 0.05, 0.025])
     arm = list(range(7))
     ee_link = 7
@@ -101,7 +110,8 @@ def main():
 
     pos = [0.45, 0.0, 0.20]
     yaw = 0.0
-    move_to(pos, yaw)
+    if kuka is not None:
+        move_to(pos, yaw)
     totals, physics, render = [], [], []
     for _ in range(args.steps):
         d = [rng.uniform(-0.05, 0.05) for _ in range(3)]
@@ -112,6 +122,17 @@ def main():
         if args.mode == "bulletarm":
             move_to(pos, yaw)
             grip(open_ratio)
+        elif args.mode == "floating":
+            start = p.getBasePositionAndOrientation(gripper)[0]
+            goal = [pos[0], pos[1], pos[2] + 0.055]
+            p.setJointMotorControlArray(gripper, [0, 1], p.POSITION_CONTROL,
+                                        targetPositions=[open_ratio * 0.0375] * 2, forces=[20, 20])
+            orn = p.getQuaternionFromEuler([0, 0, yaw])
+            for k in range(1, 25):
+                s_ = k / 24.0
+                p.changeConstraint(cid, [start[i] + (goal[i] - start[i]) * s_ for i in range(3)], orn,
+                                   maxForce=500)
+                p.stepSimulation()
         else:
             orn = p.getQuaternionFromEuler([math.pi, 0, yaw])
             q = p.calculateInverseKinematics(kuka, ee_link, pos, orn)[:7]

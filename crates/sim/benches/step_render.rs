@@ -1,6 +1,7 @@
 //! Env step + 152 px RGBD render per task (median, p95), beside the PyBullet BulletArm-like peer
-//! (`bench/pybullet_peer.py`) measured in the same run, rounds interleaved. Prints the ratio
-//! PyBullet step / our step (issue 3 target: ≥ 5×, goal 10×).
+//! (`bench/pybullet_peer.py`, three modes from cheapest to most faithful: floating gripper, Kuka with
+//! 100 fixed substeps, Kuka with BulletArm's moveTo loops) measured in the same run, rounds
+//! interleaved. Prints the ratio PyBullet step / our step (issue 3 target: ≥ 5×, goal 10×).
 //!
 //!     cargo bench -p equiarm_sim --bench step_render -- --steps 300 --rounds 2 --peer python3
 //!
@@ -91,7 +92,7 @@ fn main() {
             rend[k].extend(s.render);
         }
         if let Some(py) = &python {
-            for mode in ["fixed", "bulletarm"] {
+            for mode in ["floating", "fixed", "bulletarm"] {
                 match peer(py, mode, peer_steps) {
                     Some(r) => peers.push((mode.to_string(), r)),
                     None => eprintln!("PyBullet peer ({mode}) did not run: is pybullet installed for {py}?"),
@@ -136,8 +137,10 @@ fn main() {
         1e3 / our_med
     );
     if !peers.is_empty() {
-        println!("\nPyBullet BulletArm-like peer (Kuka + IK + 2x getCameraImage 152 px, TinyRenderer), same run:");
-        for mode in ["fixed", "bulletarm"] {
+        println!("\nPyBullet peer, same run (each step ends with 2x getCameraImage 152 px, TinyRenderer, as BulletArm's RGBD):");
+        println!("  floating = our gripper URDF on a constraint, 24 steps at 1/240 s; fixed = Kuka + 1 IK + 100 steps;");
+        println!("  bulletarm = Kuka + BulletArm's moveTo/gripper loops (IK retries, converge or 100 steps)");
+        for mode in ["floating", "fixed", "bulletarm"] {
             let mut med: Vec<f64> = peers.iter().filter(|(m, _)| m == mode).map(|(_, r)| r.0).collect();
             let mut p95: Vec<f64> = peers.iter().filter(|(m, _)| m == mode).map(|(_, r)| r.1).collect();
             let mut ph: Vec<f64> = peers.iter().filter(|(m, _)| m == mode).map(|(_, r)| r.2).collect();
