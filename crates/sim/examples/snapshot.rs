@@ -7,8 +7,8 @@
 
 use std::path::PathBuf;
 
-use equiarm_sim::snapshot::write_pngs;
-use equiarm_sim::{Env, EnvConfig, TaskKind, ViewPreset};
+use equiarm_sim::snapshot::snapshot_task;
+use equiarm_sim::{EnvConfig, TaskKind, ViewPreset};
 
 fn main() -> Result<(), equiarm_sim::SimError> {
     let args: Vec<String> = std::env::args().collect();
@@ -23,17 +23,7 @@ fn main() -> Result<(), equiarm_sim::SimError> {
         }
         let mut cfg = EnvConfig::new(task);
         cfg.camera = preset.config();
-        let mut env = Env::new(cfg)?;
-        let mut obs = env.reset(seed)?;
-        for _ in 0..steps {
-            let r = env.step(&obs.expert_action)?;
-            obs = r.observation;
-            if r.done {
-                break;
-            }
-        }
-        let frame = env.render().expect("env was reset");
-        let files = write_pngs(&frame, &out, task.name())?;
+        let files = snapshot_task(cfg, seed, steps, &out)?;
         println!("{}: {}", task.name(), files.color.display());
     }
     Ok(())

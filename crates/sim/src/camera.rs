@@ -105,6 +105,18 @@ impl Default for CameraConfig {
     }
 }
 
+/// The fields of `sensor_msgs/CameraInfo` (without header and ROI).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CameraInfoData {
+    pub width: u32,
+    pub height: u32,
+    pub distortion_model: &'static str,
+    pub d: [f64; 5],
+    pub k: [f64; 9],
+    pub r: [f64; 9],
+    pub p: [f64; 12],
+}
+
 /// A validated camera: intrinsics and extrinsics.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {
@@ -195,6 +207,19 @@ impl Camera {
     /// CameraInfo `P` (row-major 3×4, monocular: no baseline).
     pub fn camera_info_p(&self) -> [f64; 12] {
         [self.fx, 0.0, self.cx, 0.0, 0.0, self.fy, self.cy, 0.0, 0.0, 0.0, 1.0, 0.0]
+    }
+
+    /// Everything a `sensor_msgs/CameraInfo` needs (no distortion: `plumb_bob` with zero D, R = I).
+    pub fn camera_info(&self) -> CameraInfoData {
+        CameraInfoData {
+            width: self.config.width as u32,
+            height: self.config.height as u32,
+            distortion_model: "plumb_bob",
+            d: [0.0; 5],
+            k: self.camera_info_k(),
+            r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            p: self.camera_info_p(),
+        }
     }
 
     /// Projects a world point to (u, v, planar depth); `None` behind the camera.
