@@ -20,7 +20,10 @@ fn main() -> Result<(), equiarm_sim::SimError> {
         if let Some(v) = std::env::var("SUBSTEPS").ok().and_then(|v| v.parse().ok()) {
             cfg.params.substeps = v;
         }
-        if let Some(v) = std::env::var("DT_HZ").ok().and_then(|v| v.parse::<f32>().ok()) {
+        if let Some(v) = std::env::var("DT_HZ")
+            .ok()
+            .and_then(|v| v.parse::<f32>().ok())
+        {
             cfg.params.dt = 1.0 / v;
         }
         let mut env = Env::new(cfg)?;

@@ -189,7 +189,8 @@ pub fn parse_urdf(file: &str, text: &str) -> Result<Asset> {
                 return Err(SimError::UrdfInvalid {
                     file: file.to_string(),
                     element: format!("link `{}` material `{}`", link.name, mat.name),
-                    message: "material has no colour and no robot-level material of that name".into(),
+                    message: "material has no colour and no robot-level material of that name"
+                        .into(),
                 });
             }
         }
@@ -203,10 +204,38 @@ pub fn parse_urdf(file: &str, text: &str) -> Result<Asset> {
 }
 
 const NUMERIC_ATTRIBUTES: [&str; 22] = [
-    "value", "xyz", "rpy", "size", "radius", "length", "lower", "upper", "effort", "velocity", "ixx",
-    "ixy", "ixz", "iyy", "iyz", "izz", "rgba", "scale", "multiplier", "offset", "damping", "friction",
+    "value",
+    "xyz",
+    "rpy",
+    "size",
+    "radius",
+    "length",
+    "lower",
+    "upper",
+    "effort",
+    "velocity",
+    "ixx",
+    "ixy",
+    "ixz",
+    "iyy",
+    "iyz",
+    "izz",
+    "rgba",
+    "scale",
+    "multiplier",
+    "offset",
+    "damping",
+    "friction",
 ];
-const JOINT_TYPES: [&str; 7] = ["revolute", "continuous", "prismatic", "fixed", "floating", "planar", "spherical"];
+const JOINT_TYPES: [&str; 7] = [
+    "revolute",
+    "continuous",
+    "prismatic",
+    "fixed",
+    "floating",
+    "planar",
+    "spherical",
+];
 
 /// A light scan of URDF text for the errors urdf-rs reports without a location: a numeric attribute
 /// that is not a number, or an unknown joint type. Returns ("line N: <owner> <tag attr=...>", message).
@@ -229,20 +258,22 @@ fn locate_xml_error(text: &str) -> Option<(String, String)> {
         let (name, rest) = tag.split_once(char::is_whitespace).unwrap_or((tag, ""));
         let attrs = parse_attributes(rest);
         let attr = |k: &str| attrs.iter().find(|(a, _)| *a == k).map(|(_, v)| *v);
-        if name == "link" || name == "joint" {
-            if let Some(n) = attr("name") {
-                owner = format!("{name} `{n}`");
-            }
+        if (name == "link" || name == "joint")
+            && let Some(n) = attr("name")
+        {
+            owner = format!("{name} `{n}`");
         }
-        if name == "joint" {
-            if let Some(t) = attr("type") {
-                if !JOINT_TYPES.contains(&t) {
-                    return Some((
-                        format!("line {line}: {owner} <joint type=\"{t}\">"),
-                        format!("unknown joint type `{t}` (expected one of {})", JOINT_TYPES.join(", ")),
-                    ));
-                }
-            }
+        if name == "joint"
+            && let Some(t) = attr("type")
+            && !JOINT_TYPES.contains(&t)
+        {
+            return Some((
+                format!("line {line}: {owner} <joint type=\"{t}\">"),
+                format!(
+                    "unknown joint type `{t}` (expected one of {})",
+                    JOINT_TYPES.join(", ")
+                ),
+            ));
         }
         for (k, v) in &attrs {
             if !NUMERIC_ATTRIBUTES.contains(k) {
@@ -265,8 +296,12 @@ fn parse_attributes(s: &str) -> Vec<(&str, &str)> {
     while let Some(eq) = rest.find('=') {
         let key = rest[..eq].trim();
         let after = rest[eq + 1..].trim_start();
-        let Some(q) = after.chars().next().filter(|c| *c == '"' || *c == '\'') else { break };
-        let Some(close) = after[1..].find(q) else { break };
+        let Some(q) = after.chars().next().filter(|c| *c == '"' || *c == '\'') else {
+            break;
+        };
+        let Some(close) = after[1..].find(q) else {
+            break;
+        };
         out.push((key, &after[1..1 + close]));
         rest = &after[close + 2..];
     }
@@ -291,21 +326,41 @@ fn finite(v: &[f64]) -> bool {
 
 fn validate(file: &str, robot: &urdf_rs::Robot) -> Result<()> {
     if robot.links.is_empty() {
-        return Err(invalid(file, format!("robot `{}`", robot.name), "has no links"));
+        return Err(invalid(
+            file,
+            format!("robot `{}`", robot.name),
+            "has no links",
+        ));
     }
     let mut names = HashMap::new();
     for link in &robot.links {
         if names.insert(link.name.as_str(), ()).is_some() {
-            return Err(invalid(file, format!("link `{}`", link.name), "duplicate link name"));
+            return Err(invalid(
+                file,
+                format!("link `{}`", link.name),
+                "duplicate link name",
+            ));
         }
         let el = |what: &str| format!("link `{}` {what}", link.name);
         let i = &link.inertial;
         if !(i.mass.value.is_finite() && i.mass.value >= 0.0) {
-            return Err(invalid(file, el("<inertial><mass>"), format!("mass {} is not a finite non-negative number", i.mass.value)));
+            return Err(invalid(
+                file,
+                el("<inertial><mass>"),
+                format!("mass {} is not a finite non-negative number", i.mass.value),
+            ));
         }
         let t = &i.inertia;
-        if !finite(&[t.ixx, t.ixy, t.ixz, t.iyy, t.iyz, t.izz]) || t.ixx < 0.0 || t.iyy < 0.0 || t.izz < 0.0 {
-            return Err(invalid(file, el("<inertial><inertia>"), "inertia must be finite with non-negative diagonal"));
+        if !finite(&[t.ixx, t.ixy, t.ixz, t.iyy, t.iyz, t.izz])
+            || t.ixx < 0.0
+            || t.iyy < 0.0
+            || t.izz < 0.0
+        {
+            return Err(invalid(
+                file,
+                el("<inertial><inertia>"),
+                "inertia must be finite with non-negative diagonal",
+            ));
         }
         if !finite(&i.origin.xyz.0) || !finite(&i.origin.rpy.0) {
             return Err(invalid(file, el("<inertial><origin>"), "non-finite origin"));
@@ -322,7 +377,11 @@ fn validate(file: &str, robot: &urdf_rs::Robot) -> Result<()> {
         let el = |what: &str| format!("joint `{}`{what}", joint.name);
         for (role, l) in [("parent", &joint.parent.link), ("child", &joint.child.link)] {
             if !names.contains_key(l.as_str()) {
-                return Err(invalid(file, el(&format!(" <{role} link=\"{l}\">")), "names a link that does not exist"));
+                return Err(invalid(
+                    file,
+                    el(&format!(" <{role} link=\"{l}\">")),
+                    "names a link that does not exist",
+                ));
             }
         }
         if !finite(&joint.origin.xyz.0) || !finite(&joint.origin.rpy.0) {
@@ -330,11 +389,22 @@ fn validate(file: &str, robot: &urdf_rs::Robot) -> Result<()> {
         }
         let a = joint.axis.xyz.0;
         if !finite(&a) || a.iter().map(|x| x * x).sum::<f64>() < 1e-12 {
-            return Err(invalid(file, el(" <axis>"), "axis must be finite and non-zero"));
+            return Err(invalid(
+                file,
+                el(" <axis>"),
+                "axis must be finite and non-zero",
+            ));
         }
         let l = &joint.limit;
         if !l.lower.is_finite() || !l.upper.is_finite() || l.lower > l.upper {
-            return Err(invalid(file, el(" <limit>"), format!("limits [{}, {}] must be finite with lower <= upper", l.lower, l.upper)));
+            return Err(invalid(
+                file,
+                el(" <limit>"),
+                format!(
+                    "limits [{}, {}] must be finite with lower <= upper",
+                    l.lower, l.upper
+                ),
+            ));
         }
     }
     Ok(())
@@ -349,13 +419,23 @@ fn check_geometry(file: &str, el: String, g: &urdf_rs::Geometry) -> Result<()> {
         }
         G::Sphere { radius } => radius.is_finite() && *radius > 0.0,
         G::Mesh { filename, .. } => {
-            return Err(invalid(file, el, format!("mesh `{filename}` is not supported (use boxes, cylinders, spheres or capsules)")));
+            return Err(invalid(
+                file,
+                el,
+                format!(
+                    "mesh `{filename}` is not supported (use boxes, cylinders, spheres or capsules)"
+                ),
+            ));
         }
     };
     if ok {
         Ok(())
     } else {
-        Err(invalid(file, el, "geometry sizes must be finite and positive"))
+        Err(invalid(
+            file,
+            el,
+            "geometry sizes must be finite and positive",
+        ))
     }
 }
 
@@ -368,7 +448,10 @@ mod tests {
         let a = Assets::bundled().unwrap();
         let cube = a.get(AssetKind::Cube);
         assert_eq!(cube.link_colors.len(), 1);
-        assert!(cube.link_colors[0][0] > 0.8 && cube.link_colors[0][1] < 0.2, "cube is red");
+        assert!(
+            cube.link_colors[0][0] > 0.8 && cube.link_colors[0][1] < 0.2,
+            "cube is red"
+        );
         let g = a.get(AssetKind::Gripper);
         let palm = g.link_index("palm").unwrap();
         let finger = g.link_index("left_finger").unwrap();
@@ -383,7 +466,10 @@ mod tests {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../urdf");
         let from_disk = Assets::from_dir(&dir).unwrap();
         for kind in AssetKind::ALL {
-            assert_eq!(from_disk.get(kind).robot.links.len(), Assets::bundled().unwrap().get(kind).robot.links.len());
+            assert_eq!(
+                from_disk.get(kind).robot.links.len(),
+                Assets::bundled().unwrap().get(kind).robot.links.len()
+            );
         }
     }
 
@@ -412,23 +498,35 @@ mod tests {
         let bad = GOOD.replace(r#"type="prismatic""#, r#"type="telescopic""#);
         let msg = parse_urdf("bad_joint.urdf", &bad).unwrap_err().to_string();
         assert!(msg.contains("bad_joint.urdf"), "{msg}");
-        assert!(msg.contains("joint `j`") && msg.contains("telescopic") && msg.contains("line 5"), "{msg}");
+        assert!(
+            msg.contains("joint `j`") && msg.contains("telescopic") && msg.contains("line 5"),
+            "{msg}"
+        );
     }
 
     #[test]
     fn joint_to_unknown_link_fails_naming_joint() {
         let bad = GOOD.replace(r#"<child link="b"/>"#, r#"<child link="nowhere"/>"#);
         let msg = parse_urdf("bad_link.urdf", &bad).unwrap_err().to_string();
-        assert!(msg.contains("bad_link.urdf") && msg.contains("joint `j`") && msg.contains("nowhere"), "{msg}");
+        assert!(
+            msg.contains("bad_link.urdf") && msg.contains("joint `j`") && msg.contains("nowhere"),
+            "{msg}"
+        );
     }
 
     #[test]
     fn missing_required_joint_fails_naming_it() {
-        let msg = match parse_urdf("g.urdf", GOOD).unwrap().joint_index("left_finger_joint") {
+        let msg = match parse_urdf("g.urdf", GOOD)
+            .unwrap()
+            .joint_index("left_finger_joint")
+        {
             Err(e) => e.to_string(),
             Ok(_) => panic!("joint should be missing"),
         };
-        assert!(msg.contains("g.urdf") && msg.contains("left_finger_joint"), "{msg}");
+        assert!(
+            msg.contains("g.urdf") && msg.contains("left_finger_joint"),
+            "{msg}"
+        );
     }
 
     #[test]
@@ -436,15 +534,27 @@ mod tests {
         let bad = GOOD.replace(r#"<mass value="1"/>"#, r#"<mass value="heavy"/>"#);
         let msg = parse_urdf("bad_mass.urdf", &bad).unwrap_err().to_string();
         assert!(msg.contains("bad_mass.urdf"), "{msg}");
-        assert!(msg.contains("link `a`") && msg.contains("<mass value=\"heavy\">"), "{msg}");
+        assert!(
+            msg.contains("link `a`") && msg.contains("<mass value=\"heavy\">"),
+            "{msg}"
+        );
         let bad = GOOD.replace(r#"<axis xyz="1 0 0"/>"#, r#"<axis xyz="1 zero 0"/>"#);
         let msg = parse_urdf("bad_axis.urdf", &bad).unwrap_err().to_string();
-        assert!(msg.contains("bad_axis.urdf") && msg.contains("joint `j`") && msg.contains("`zero`"), "{msg}");
+        assert!(
+            msg.contains("bad_axis.urdf") && msg.contains("joint `j`") && msg.contains("`zero`"),
+            "{msg}"
+        );
         let bad = GOOD.replace(r#"<mass value="1"/>"#, r#"<mass value="NaN"/>"#);
         let msg = parse_urdf("nan_mass.urdf", &bad).unwrap_err().to_string();
-        assert!(msg.contains("nan_mass.urdf") && msg.contains("link `a`") && msg.contains("mass"), "{msg}");
+        assert!(
+            msg.contains("nan_mass.urdf") && msg.contains("link `a`") && msg.contains("mass"),
+            "{msg}"
+        );
         let bad = GOOD.replace(r#"size="0.1 0.1 0.1""#, r#"size="0.1 -0.1 0.1""#);
         let msg = parse_urdf("neg_box.urdf", &bad).unwrap_err().to_string();
-        assert!(msg.contains("neg_box.urdf") && msg.contains("<collision> #0"), "{msg}");
+        assert!(
+            msg.contains("neg_box.urdf") && msg.contains("<collision> #0"),
+            "{msg}"
+        );
     }
 }

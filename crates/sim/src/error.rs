@@ -26,7 +26,10 @@ pub enum SimError {
     },
     /// A configuration value is out of its domain.
     #[error("invalid config value `{field}`: {message}")]
-    Config { field: &'static str, message: String },
+    Config {
+        field: &'static str,
+        message: String,
+    },
     /// An action had a non-finite component.
     #[error("invalid action: {0}")]
     Action(String),
