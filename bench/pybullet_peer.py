@@ -22,7 +22,7 @@ urdf/gripper.urdf driven by a fixed constraint moved linearly over 24 physics st
 
 Prints one JSON line: {"steps", "median_ms", "p95_ms", "physics_median_ms", "render_median_ms"}.
 
-    pip install pybullet numpy
+    pip install pybullet
     python3 bench/pybullet_peer.py --steps 200 --seed 0
 """
 import argparse

@@ -249,3 +249,23 @@ fn holding_flag_follows_the_grasp() {
         .unwrap_or(o);
     assert!(!o.holding);
 }
+
+#[test]
+fn gripper_only_scene_has_a_plain_floor() {
+    let floor_colours = |gripper_only: bool| {
+        let mut cfg = EnvConfig::new(TaskKind::BlockPicking);
+        cfg.corruption.gripper_only = gripper_only;
+        let mut env = Env::new(cfg).unwrap();
+        let o = env.reset(0).unwrap();
+        let table = env.segmentation_names().iter().position(|n| n == "table").unwrap() as u16;
+        let mut colours = std::collections::HashSet::new();
+        for (i, s) in o.segmentation.iter().enumerate() {
+            if *s == table {
+                colours.insert([o.color[i * 3], o.color[i * 3 + 1], o.color[i * 3 + 2]]);
+            }
+        }
+        colours.len()
+    };
+    assert_eq!(floor_colours(false), 2, "default: two checker colours (flat shading)");
+    assert_eq!(floor_colours(true), 1, "gripper-only: one plain colour");
+}
