@@ -15,7 +15,8 @@ use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaterni
 use crate::error::{Result, SimError};
 
 /// Named camera presets: the paper's default oblique view and the view-angle sweep of §5.1.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum ViewPreset {
     /// BulletArm `camera_side`: eye (1, 0, 0.6), target (0.45, 0, 0): elevation ≈ 47.5°, distance ≈ 0.814 m.
     Side,
@@ -75,7 +76,8 @@ impl ViewPreset {
 }
 
 /// Camera configuration. The eye is at `target + distance·(cos e, 0, sin e)`.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct CameraConfig {
     /// Point looked at, world metres.
     pub target: [f64; 3],

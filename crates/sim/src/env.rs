@@ -24,7 +24,8 @@ use crate::tasks::{RESET_TCP, TaskKind, TaskState};
 use crate::world::{Scene, SimParams};
 
 /// Symmetry corruptions as config.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct Corruption {
     /// §5.2: every observation independently mirrored left↔right w.p. 0.5, then up↔down w.p. 0.5.
     pub random_reflection: bool,
@@ -37,8 +38,10 @@ pub struct Corruption {
     pub gripper_only: bool,
 }
 
-/// Everything that defines an env.
-#[derive(Clone, Debug, PartialEq)]
+/// Everything that defines an env (serde: unknown keys are rejected; missing keys take the
+/// defaults of [`EnvConfig::new`] with block picking).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct EnvConfig {
     pub task: TaskKind,
     pub camera: CameraConfig,
@@ -48,6 +51,12 @@ pub struct EnvConfig {
     pub max_steps: u32,
     /// Render images. With `false`, observations carry empty image buffers (for planner runs).
     pub render: bool,
+}
+
+impl Default for EnvConfig {
+    fn default() -> Self {
+        Self::new(TaskKind::BlockPicking)
+    }
 }
 
 impl EnvConfig {

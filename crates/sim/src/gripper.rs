@@ -30,7 +30,7 @@ pub const MAX_DROT: f32 = std::f32::consts::FRAC_PI_4;
 
 /// A gripper command in physical units (PAPER_SPEC §1.2): target open ratio in [0, 1]
 /// (0 closed, 1 open), TCP position deltas in metres, yaw delta in radians.
-#[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Action {
     pub open_ratio: f32,
     pub dx: f32,

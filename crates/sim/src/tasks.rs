@@ -24,7 +24,8 @@ use crate::rng::Rng;
 use crate::world::{Scene, yaw_of};
 
 /// The five tasks.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum TaskKind {
     BlockPulling,
     BlockPushing,

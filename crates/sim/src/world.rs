@@ -14,7 +14,8 @@ use crate::assets::{Asset, AssetKind, Assets};
 use crate::error::{Result, SimError};
 
 /// Physics settings. Defaults follow SIM_NOTES "Recommended settings".
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct SimParams {
     /// Physics time step, s.
     pub dt: f32,

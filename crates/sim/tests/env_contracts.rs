@@ -257,7 +257,11 @@ fn gripper_only_scene_has_a_plain_floor() {
         cfg.corruption.gripper_only = gripper_only;
         let mut env = Env::new(cfg).unwrap();
         let o = env.reset(0).unwrap();
-        let table = env.segmentation_names().iter().position(|n| n == "table").unwrap() as u16;
+        let table = env
+            .segmentation_names()
+            .iter()
+            .position(|n| n == "table")
+            .unwrap() as u16;
         let mut colours = std::collections::HashSet::new();
         for (i, s) in o.segmentation.iter().enumerate() {
             if *s == table {
@@ -266,6 +270,29 @@ fn gripper_only_scene_has_a_plain_floor() {
         }
         colours.len()
     };
-    assert_eq!(floor_colours(false), 2, "default: two checker colours (flat shading)");
+    assert_eq!(
+        floor_colours(false),
+        2,
+        "default: two checker colours (flat shading)"
+    );
     assert_eq!(floor_colours(true), 1, "gripper-only: one plain colour");
+}
+
+#[test]
+fn config_round_trips_through_json_and_rejects_unknown_keys() {
+    let mut cfg = EnvConfig::new(TaskKind::DrawerOpening);
+    cfg.camera = equiarm_sim::ViewPreset::Angle30.config();
+    cfg.corruption.random_reflection = true;
+    let text = serde_json::to_string(&cfg).unwrap();
+    let back: EnvConfig = serde_json::from_str(&text).unwrap();
+    assert_eq!(back, cfg);
+    let partial: EnvConfig =
+        serde_json::from_str(r#"{"task": "block_in_bowl", "params": {"substeps": 30}}"#).unwrap();
+    assert_eq!(partial.task, TaskKind::BlockInBowl);
+    assert_eq!(partial.params.substeps, 30);
+    assert_eq!(partial.params.dt, equiarm_sim::SimParams::default().dt);
+    let err =
+        serde_json::from_str::<EnvConfig>(r#"{"task": "block_picking", "params": {"substep": 3}}"#)
+            .unwrap_err();
+    assert!(err.to_string().contains("substep"), "{err}");
 }
