@@ -1,0 +1,60 @@
+//! Runs each task's expert planner for seeds 0..N (default 100) and prints the success counts.
+//! Acceptance (issue 3): at least 95 of 100 per task.
+//!
+//! cargo run --release -p equiarm_sim --example expert_success -- [N] [task]
+
+use equiarm_sim::{Env, EnvConfig, TaskKind};
+
+fn main() -> Result<(), equiarm_sim::SimError> {
+    let args: Vec<String> = std::env::args().collect();
+    let n: u64 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(100);
+    let only = args.get(2).and_then(|s| TaskKind::from_name(s));
+    let verbose = std::env::var_os("VERBOSE").is_some();
+    println!("task             successes / episodes   mean steps (successes)");
+    for task in TaskKind::ALL {
+        if only.is_some_and(|t| t != task) {
+            continue;
+        }
+        let mut cfg = EnvConfig::new(task);
+        cfg.render = false;
+        if let Some(v) = std::env::var("SUBSTEPS").ok().and_then(|v| v.parse().ok()) {
+            cfg.params.substeps = v;
+        }
+        if let Some(v) = std::env::var("DT_HZ")
+            .ok()
+            .and_then(|v| v.parse::<f32>().ok())
+        {
+            cfg.params.dt = 1.0 / v;
+        }
+        let mut env = Env::new(cfg)?;
+        let (mut ok, mut steps) = (0u64, 0u64);
+        let mut failed = Vec::new();
+        for seed in 0..n {
+            let mut obs = env.reset(seed)?;
+            loop {
+                let r = env.step(&obs.expert_action)?;
+                obs = r.observation;
+                if r.done {
+                    if r.info.success {
+                        ok += 1;
+                        steps += obs.step as u64;
+                    } else {
+                        failed.push((seed, r.info.invalid));
+                    }
+                    break;
+                }
+            }
+        }
+        println!(
+            "{:<16} {:>4} / {:<4}            {:.1}",
+            task.name(),
+            ok,
+            n,
+            steps as f64 / ok.max(1) as f64
+        );
+        if verbose && !failed.is_empty() {
+            println!("  failed seeds (seed, invalid): {failed:?}");
+        }
+    }
+    Ok(())
+}

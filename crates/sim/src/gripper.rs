@@ -1,0 +1,306 @@
+//! The floating parallel-jaw gripper: a kinematic palm (position-driven each physics step) carrying two
+//! dynamic fingers on prismatic impulse joints with position motors (SIM_NOTES §2). The controlled
+//! point is the fingertip centre (TCP), 0.055 m below the palm centre; its yaw is about world z.
+//!
+//! Action semantics (PAPER_SPEC §3.2): the delta is clipped to ±0.05 m / ±π/4, the target TCP is
+//! clamped to the workspace box, yaw is neither clipped nor wrapped, and the palm moves linearly over
+//! the substeps; then the finger motors get the new open ratio (and, if it changed, a few more
+//! substeps to close or open), as BulletArm moves the arm before it drives the gripper. Holding (§3.2 item 4): an object counts as held when both fingers touch it with
+//! contact normals that are mostly horizontal (|n_z| < 0.3).
+//!
+//! Limitations: the palm is kinematic, so it pushes dynamic objects with unlimited force and passes
+//! through the fixed table (the TCP height clamp keeps it above). The fingers open along the palm's
+//! local x axis.
+
+use rapier3d::prelude::*;
+use rapier3d_urdf::UrdfRobotHandles;
+
+use crate::assets::{AssetKind, Assets};
+use crate::error::Result;
+use crate::world::Scene;
+
+/// TCP (fingertip centre) below the palm centre, m.
+pub const TCP_BELOW_PALM: f32 = 0.055;
+/// Workspace box of the TCP (PAPER_SPEC §3.1): x, y, z ranges in metres.
+pub const WORKSPACE: [[f32; 2]; 3] = [[0.25, 0.65], [-0.2, 0.2], [0.01, 0.25]];
+/// Largest position delta per step, m.
+pub const MAX_DPOS: f32 = 0.05;
+/// Largest yaw delta per step, rad.
+pub const MAX_DROT: f32 = std::f32::consts::FRAC_PI_4;
+
+/// A gripper command in physical units (PAPER_SPEC §1.2): target open ratio in [0, 1]
+/// (0 closed, 1 open), TCP position deltas in metres, yaw delta in radians.
+#[derive(Clone, Copy, Debug, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct Action {
+    pub open_ratio: f32,
+    pub dx: f32,
+    pub dy: f32,
+    pub dz: f32,
+    pub dtheta: f32,
+}
+
+impl Action {
+    pub fn new(open_ratio: f32, dx: f32, dy: f32, dz: f32, dtheta: f32) -> Self {
+        Self {
+            open_ratio,
+            dx,
+            dy,
+            dz,
+            dtheta,
+        }
+    }
+
+    /// Components in the order (p, dx, dy, dz, dθ).
+    pub fn to_array(self) -> [f32; 5] {
+        [self.open_ratio, self.dx, self.dy, self.dz, self.dtheta]
+    }
+
+    pub fn is_finite(&self) -> bool {
+        self.to_array().iter().all(|x| x.is_finite())
+    }
+
+    /// Clipped to the action ranges: p ∈ [0, 1], |d| ≤ 0.05, |dθ| ≤ π/4.
+    pub fn clipped(self) -> Self {
+        Self {
+            open_ratio: self.open_ratio.clamp(0.0, 1.0),
+            dx: self.dx.clamp(-MAX_DPOS, MAX_DPOS),
+            dy: self.dy.clamp(-MAX_DPOS, MAX_DPOS),
+            dz: self.dz.clamp(-MAX_DPOS, MAX_DPOS),
+            dtheta: self.dtheta.clamp(-MAX_DROT, MAX_DROT),
+        }
+    }
+
+    /// The agent's normalised action u ∈ [-1, 1]^5 (order p, x, y, z, θ) of this physical action,
+    /// after clipping (PAPER_SPEC §1.2).
+    pub fn to_normalized(self) -> [f32; 5] {
+        let a = self.clipped();
+        [
+            a.open_ratio * 2.0 - 1.0,
+            a.dx / MAX_DPOS,
+            a.dy / MAX_DPOS,
+            a.dz / MAX_DPOS,
+            a.dtheta / MAX_DROT,
+        ]
+    }
+
+    /// Decodes a normalised action (values outside [-1, 1] are clipped).
+    pub fn from_normalized(u: [f32; 5]) -> Self {
+        let u = u.map(|x| x.clamp(-1.0, 1.0));
+        Self::new(
+            (u[0] + 1.0) / 2.0,
+            u[1] * MAX_DPOS,
+            u[2] * MAX_DPOS,
+            u[3] * MAX_DPOS,
+            u[4] * MAX_DROT,
+        )
+    }
+}
+
+/// Handles and commanded state of the gripper in one scene.
+#[derive(Clone, Debug)]
+pub struct Gripper {
+    pub palm: RigidBodyHandle,
+    pub fingers: [RigidBodyHandle; 2],
+    pub finger_colliders: [ColliderHandle; 2],
+    pub finger_joints: [ImpulseJointHandle; 2],
+    /// Commanded TCP position (the palm is kinematic, so this is where it is after a step).
+    pub tcp: Vector,
+    /// Commanded yaw, rad (not wrapped).
+    pub yaw: f32,
+    /// Last commanded open ratio.
+    pub open_target: f32,
+    /// Finger travel (half the maximum jaw gap), m, from the URDF limit.
+    pub travel: f32,
+    /// Finger half-thickness offset from the palm axis when closed, m.
+    finger_offset: f32,
+}
+
+fn palm_pose(tcp: Vector, yaw: f32) -> Pose {
+    Pose::from_parts(
+        tcp + Vector::new(0.0, 0.0, TCP_BELOW_PALM),
+        Rotation::from_rotation_z(yaw),
+    )
+}
+
+impl Gripper {
+    /// Inserts the gripper with its TCP at `tcp`, yaw `yaw`, fingers commanded to `open_ratio`.
+    pub fn insert(
+        scene: &mut Scene,
+        assets: &Assets,
+        tcp: Vector,
+        yaw: f32,
+        open_ratio: f32,
+    ) -> Result<Self> {
+        let asset = assets.get(AssetKind::Gripper);
+        let palm_i = asset.link_index("palm")?;
+        let li = asset.link_index("left_finger")?;
+        let ri = asset.link_index("right_finger")?;
+        let lj = asset.joint_index("left_finger_joint")?;
+        let rj = asset.joint_index("right_finger_joint")?;
+        let travel = asset.robot.joints[lj].limit.upper as f32;
+        let finger_offset = asset.robot.joints[lj].origin.xyz.0[0].abs() as f32;
+        let friction = scene.params.finger_friction;
+        let h: UrdfRobotHandles<ImpulseJointHandle> =
+            scene.insert(asset, "gripper", palm_pose(tcp, yaw), false, friction)?;
+        // Inserted links keep the URDF order (no link of the gripper is an empty frame to squeeze).
+        let link_of = |urdf_index: usize| -> Result<&rapier3d_urdf::UrdfLinkHandle> {
+            h.links
+                .get(urdf_index)
+                .ok_or_else(|| crate::error::SimError::UrdfInvalid {
+                    file: asset.file.clone(),
+                    element: format!("link `{}`", asset.robot.links[urdf_index].name),
+                    message: "was not turned into a rigid body".into(),
+                })
+        };
+        let palm = link_of(palm_i)?.body;
+        let left = link_of(li)?;
+        let right = link_of(ri)?;
+        let joint_of = |urdf_index: usize| {
+            h.joints.get(urdf_index).map(|j| j.joint).ok_or_else(|| {
+                crate::error::SimError::UrdfInvalid {
+                    file: asset.file.clone(),
+                    element: format!("joint `{}`", asset.robot.joints[urdf_index].name),
+                    message: "was not turned into a rapier joint".into(),
+                }
+            })
+        };
+        let first_collider = |l: &rapier3d_urdf::UrdfLinkHandle, i: usize| {
+            l.colliders.first().map(|c| c.handle).ok_or_else(|| {
+                crate::error::SimError::UrdfInvalid {
+                    file: asset.file.clone(),
+                    element: format!("link `{}`", asset.robot.links[i].name),
+                    message: "a finger needs a <collision> shape".into(),
+                }
+            })
+        };
+        let finger_colliders = [first_collider(left, li)?, first_collider(right, ri)?];
+        let mut g = Self {
+            palm,
+            fingers: [left.body, right.body],
+            finger_colliders,
+            finger_joints: [joint_of(lj)?, joint_of(rj)?],
+            tcp,
+            yaw,
+            open_target: open_ratio,
+            travel,
+            finger_offset,
+        };
+        scene.physics.bodies[palm].set_body_type(RigidBodyType::KinematicPositionBased, true);
+        let p = scene.params.clone();
+        for j in g.finger_joints {
+            if let Some(joint) = scene.physics.impulse_joints.get_mut(j, true) {
+                joint
+                    .data
+                    .set_motor_model(JointAxis::LinX, MotorModel::ForceBased);
+                joint
+                    .data
+                    .set_motor_max_force(JointAxis::LinX, p.grip_max_force);
+            }
+        }
+        g.command_fingers(scene, open_ratio);
+        Ok(g)
+    }
+
+    /// Sets both finger motors to `open_ratio` of their travel.
+    pub fn command_fingers(&mut self, scene: &mut Scene, open_ratio: f32) {
+        self.open_target = open_ratio.clamp(0.0, 1.0);
+        let target = self.open_target * self.travel;
+        for j in self.finger_joints {
+            if let Some(joint) = scene.physics.impulse_joints.get_mut(j, true) {
+                joint.data.set_motor_position(
+                    JointAxis::LinX,
+                    target,
+                    scene.params.grip_stiffness,
+                    scene.params.grip_damping,
+                );
+            }
+        }
+    }
+
+    /// Executes one env step of `action` (already finite): clip, clamp, interpolate the palm over
+    /// the substeps, then settle.
+    pub fn apply(&mut self, scene: &mut Scene, action: Action) {
+        let a = action.clipped();
+        let start = self.tcp;
+        let target = Vector::new(
+            (start.x + a.dx).clamp(WORKSPACE[0][0], WORKSPACE[0][1]),
+            (start.y + a.dy).clamp(WORKSPACE[1][0], WORKSPACE[1][1]),
+            (start.z + a.dz).clamp(WORKSPACE[2][0], WORKSPACE[2][1]),
+        );
+        let yaw0 = self.yaw;
+        let yaw1 = self.yaw + a.dtheta;
+        let n = scene.params.substeps;
+        for k in 1..=n {
+            let s = k as f32 / n as f32;
+            let p = start + (target - start) * s;
+            let y = yaw0 + (yaw1 - yaw0) * s;
+            scene.physics.bodies[self.palm].set_next_kinematic_position(palm_pose(p, y));
+            scene.step();
+        }
+        self.tcp = target;
+        self.yaw = yaw1;
+        // As BulletArm's step: move first, then drive the fingers (with extra substeps only when the
+        // jaw command changes, so a grasp closes where the arm arrived, not on the way down).
+        let changed = (a.open_ratio - self.open_target).abs() > 1e-4;
+        self.command_fingers(scene, a.open_ratio);
+        let grip_steps = if changed {
+            scene.params.grip_substeps
+        } else {
+            0
+        };
+        for _ in 0..scene.params.settle_substeps + grip_steps {
+            scene.physics.bodies[self.palm].set_next_kinematic_position(palm_pose(target, yaw1));
+            scene.step();
+        }
+    }
+
+    /// Measured open ratio from the finger positions (mean of both fingers).
+    pub fn open_ratio(&self, scene: &Scene) -> f32 {
+        let palm = scene.physics.bodies[self.palm].position();
+        let axis = palm.rotation * Vector::X;
+        let mut q = 0.0;
+        for (k, f) in self.fingers.iter().enumerate() {
+            let d = scene.physics.bodies[*f].translation() - palm.translation;
+            let sign = if k == 0 { -1.0 } else { 1.0 };
+            q += sign * d.dot(axis) - self.finger_offset;
+        }
+        (q / (2.0 * self.travel)).clamp(0.0, 1.0)
+    }
+
+    /// The rigid bodies held between the fingers: touched by both fingers with contact normals
+    /// |n_z| < 0.3.
+    pub fn held_bodies(&self, scene: &Scene) -> Vec<RigidBodyHandle> {
+        let touched = |finger: ColliderHandle| -> Vec<RigidBodyHandle> {
+            let mut out = Vec::new();
+            for pair in scene.physics.narrow_phase.contact_pairs_with(finger) {
+                if !pair.has_any_active_contact() {
+                    continue;
+                }
+                let horizontal = pair
+                    .manifolds()
+                    .iter()
+                    .any(|m| !m.data.solver_contacts.is_empty() && m.data.normal.z.abs() < 0.3);
+                if !horizontal {
+                    continue;
+                }
+                let other = if pair.collider1 == finger {
+                    pair.collider2
+                } else {
+                    pair.collider1
+                };
+                if let Some(b) = scene.physics.colliders.get(other).and_then(|c| c.parent())
+                    && !self.fingers.contains(&b)
+                    && b != self.palm
+                {
+                    out.push(b);
+                }
+            }
+            out
+        };
+        let a = touched(self.finger_colliders[0]);
+        let b = touched(self.finger_colliders[1]);
+        let mut held: Vec<RigidBodyHandle> = a.into_iter().filter(|x| b.contains(x)).collect();
+        held.dedup();
+        held
+    }
+}

@@ -1,0 +1,298 @@
+//! Env contracts: determinism (same seed and actions ⇒ byte-identical observations, also through
+//! VecEnv's parallel stepping), rejection of bad actions, the corruptions, and the expert planners'
+//! success rate (CI version of the 95/100 acceptance: ≥ 19 of 20 per task, images off to stay fast).
+
+use equiarm_sim::{Action, Corruption, Env, EnvConfig, SimError, TaskKind, VecEnv};
+
+fn run(cfg: &EnvConfig, seed: u64, steps: usize) -> Vec<equiarm_sim::Observation> {
+    let mut env = Env::new(cfg.clone()).unwrap();
+    let mut obs = vec![env.reset(seed).unwrap()];
+    for k in 0..steps {
+        // The expert's action, perturbed deterministically so the run is not only the planner's.
+        let mut a = obs.last().unwrap().expert_action;
+        a.dx += 0.01 * ((k % 3) as f32 - 1.0);
+        let r = env.step(&a).unwrap();
+        obs.push(r.observation);
+        if r.done {
+            break;
+        }
+    }
+    obs
+}
+
+#[test]
+fn same_seed_and_actions_give_byte_identical_observations() {
+    for task in [TaskKind::BlockPicking, TaskKind::DrawerOpening] {
+        let cfg = EnvConfig::new(task);
+        let a = run(&cfg, 5, 8);
+        let b = run(&cfg, 5, 8);
+        assert_eq!(a.len(), b.len());
+        for (x, y) in a.iter().zip(&b) {
+            assert_eq!(x.color, y.color);
+            assert_eq!(
+                x.depth.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                y.depth.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+            );
+            assert_eq!(x.segmentation, y.segmentation);
+            assert_eq!(x.holding, y.holding);
+            assert_eq!(x.expert_action, y.expert_action);
+        }
+        let c = run(&cfg, 6, 0);
+        assert_ne!(a[0].color, c[0].color, "another seed gives another scene");
+    }
+}
+
+#[test]
+fn vec_env_matches_sequential_envs() {
+    let cfg = EnvConfig::new(TaskKind::BlockPushing);
+    let mut venv = VecEnv::new(cfg.clone(), 3).unwrap();
+    let seeds = [1, 2, 3];
+    let mut obs = venv.reset(&seeds).unwrap();
+    for _ in 0..3 {
+        let actions: Vec<Action> = obs.iter().map(|o| o.expert_action).collect();
+        obs = venv
+            .step(&actions)
+            .unwrap()
+            .into_iter()
+            .map(|r| r.observation)
+            .collect();
+    }
+    for (k, seed) in seeds.iter().enumerate() {
+        let mut env = Env::new(cfg.clone()).unwrap();
+        let mut o = env.reset(*seed).unwrap();
+        for _ in 0..3 {
+            o = env.step(&o.expert_action).unwrap().observation;
+        }
+        assert_eq!(o, obs[k]);
+    }
+}
+
+#[test]
+fn bad_actions_and_unreset_env_are_errors() {
+    let mut env = Env::new(EnvConfig::new(TaskKind::BlockPicking)).unwrap();
+    assert!(matches!(
+        env.step(&Action::default()),
+        Err(SimError::NotReset)
+    ));
+    env.reset(0).unwrap();
+    let bad = Action {
+        dx: f32::NAN,
+        ..Action::default()
+    };
+    assert!(matches!(env.step(&bad), Err(SimError::Action(_))));
+    let inf = Action {
+        dtheta: f32::INFINITY,
+        ..Action::default()
+    };
+    assert!(env.step(&inf).is_err());
+    // Out-of-range values are clipped, as in the paper: a huge dz moves 5 cm at most.
+    let o = env
+        .step(&Action {
+            open_ratio: 7.0,
+            dz: -3.0,
+            ..Action::default()
+        })
+        .unwrap()
+        .observation;
+    assert!((o.tcp[2] - 0.15).abs() < 1e-5, "tcp z {}", o.tcp[2]);
+}
+
+#[test]
+fn random_reflection_mirrors_the_clean_image() {
+    let clean = run(&EnvConfig::new(TaskKind::BlockPushing), 2, 5);
+    let mut cfg = EnvConfig::new(TaskKind::BlockPushing);
+    cfg.corruption = Corruption {
+        random_reflection: true,
+        ..Default::default()
+    };
+    let refl = run(&cfg, 2, 5);
+    let (w, h) = (clean[0].width, clean[0].height);
+    let mut kinds = std::collections::HashSet::new();
+    for (c, r) in clean.iter().zip(&refl) {
+        let mut found = None;
+        for (k, (cols, rows)) in [(false, false), (true, false), (false, true), (true, true)]
+            .into_iter()
+            .enumerate()
+        {
+            let mut img = c.segmentation.clone();
+            equiarm_sim::corrupt::reflect(&mut img, 1, w, h, cols, rows);
+            if img == r.segmentation {
+                found = Some(k);
+            }
+        }
+        kinds.insert(
+            found.expect("a reflected observation is one of the four flips of the clean one"),
+        );
+    }
+    assert!(kinds.len() >= 2, "reflections should vary: {kinds:?}");
+}
+
+#[test]
+fn occlusion_projection_is_a_height_map_around_the_gripper() {
+    let mut cfg = EnvConfig::new(TaskKind::BlockPicking);
+    cfg.corruption = Corruption {
+        occlusion_projection: true,
+        ..Default::default()
+    };
+    let mut env = Env::new(cfg).unwrap();
+    let o = env.reset(4).unwrap();
+    let missing = o
+        .depth
+        .iter()
+        .filter(|&&v| v == equiarm_sim::corrupt::MISSING)
+        .count();
+    let zero = o.depth.iter().filter(|&&v| v == 0.0).count();
+    // The table is 0.2 m below the gripper at reset; the cube top 0.15 m.
+    let table = o.depth.iter().filter(|&&v| (v - 0.2).abs() < 2e-3).count();
+    let cube = o.depth.iter().filter(|&&v| (v - 0.15).abs() < 3e-3).count();
+    println!("missing {missing} zero {zero} table {table} cube {cube}");
+    assert!(zero > 0 && table > o.depth.len() / 4 && cube > 20);
+    assert!(o.color.iter().all(|&c| c == 0));
+}
+
+#[test]
+fn expert_planners_succeed_in_19_of_20_episodes() {
+    for task in TaskKind::ALL {
+        let mut cfg = EnvConfig::new(task);
+        cfg.render = false;
+        let mut env = Env::new(cfg).unwrap();
+        let mut ok = 0;
+        for seed in 1000..1020 {
+            let mut obs = env.reset(seed).unwrap();
+            loop {
+                let r = env.step(&obs.expert_action).unwrap();
+                obs = r.observation;
+                if r.done {
+                    ok += r.info.success as u32;
+                    break;
+                }
+            }
+        }
+        println!("{}: {ok}/20", task.name());
+        assert!(ok >= 19, "{}: expert succeeded in {ok}/20", task.name());
+    }
+}
+
+/// SIM_NOTES recommends 1/120 s steps and keeping a 240 Hz regression test: the experts must not
+/// depend on the coarse step.
+#[test]
+fn experts_also_succeed_at_240_hz() {
+    for task in [
+        TaskKind::BlockPicking,
+        TaskKind::BlockPushing,
+        TaskKind::BlockInBowl,
+    ] {
+        let mut cfg = EnvConfig::new(task);
+        cfg.render = false;
+        cfg.params.dt = 1.0 / 240.0;
+        cfg.params.substeps *= 2;
+        cfg.params.settle_substeps *= 2;
+        cfg.params.grip_substeps *= 2;
+        cfg.params.reset_settle_substeps *= 2;
+        let mut env = Env::new(cfg).unwrap();
+        let mut ok = 0;
+        for seed in 0..10 {
+            let mut obs = env.reset(seed).unwrap();
+            loop {
+                let r = env.step(&obs.expert_action).unwrap();
+                obs = r.observation;
+                if r.done {
+                    ok += r.info.success as u32;
+                    break;
+                }
+            }
+        }
+        println!("{} at 240 Hz: {ok}/10", task.name());
+        assert!(ok >= 9, "{} at 240 Hz: {ok}/10", task.name());
+    }
+}
+
+#[test]
+fn holding_flag_follows_the_grasp() {
+    let mut cfg = EnvConfig::new(TaskKind::BlockPicking);
+    cfg.render = false;
+    let mut env = Env::new(cfg).unwrap();
+    let mut obs = env.reset(8).unwrap();
+    assert!(!obs.holding, "an open gripper in the air holds nothing");
+    let mut held_at = None;
+    loop {
+        let r = env.step(&obs.expert_action).unwrap();
+        obs = r.observation;
+        if obs.holding && held_at.is_none() {
+            held_at = Some(obs.step);
+            assert!(
+                obs.open_ratio < 0.8 && obs.open_ratio > 0.5,
+                "jaw around a 5 cm cube: {}",
+                obs.open_ratio
+            );
+        }
+        if r.done {
+            assert!(r.info.success);
+            break;
+        }
+    }
+    assert!(held_at.is_some());
+    // Opening the jaw drops the cube: no longer held.
+    let o = env
+        .step(&Action {
+            open_ratio: 1.0,
+            ..Action::default()
+        })
+        .unwrap()
+        .observation;
+    let o = env
+        .step(&Action {
+            open_ratio: 1.0,
+            ..Action::default()
+        })
+        .map(|r| r.observation)
+        .unwrap_or(o);
+    assert!(!o.holding);
+}
+
+#[test]
+fn gripper_only_scene_has_a_plain_floor() {
+    let floor_colours = |gripper_only: bool| {
+        let mut cfg = EnvConfig::new(TaskKind::BlockPicking);
+        cfg.corruption.gripper_only = gripper_only;
+        let mut env = Env::new(cfg).unwrap();
+        let o = env.reset(0).unwrap();
+        let table = env
+            .segmentation_names()
+            .iter()
+            .position(|n| n == "table")
+            .unwrap() as u16;
+        let mut colours = std::collections::HashSet::new();
+        for (i, s) in o.segmentation.iter().enumerate() {
+            if *s == table {
+                colours.insert([o.color[i * 3], o.color[i * 3 + 1], o.color[i * 3 + 2]]);
+            }
+        }
+        colours.len()
+    };
+    assert_eq!(
+        floor_colours(false),
+        2,
+        "default: two checker colours (flat shading)"
+    );
+    assert_eq!(floor_colours(true), 1, "gripper-only: one plain colour");
+}
+
+#[test]
+fn config_round_trips_through_json_and_rejects_unknown_keys() {
+    let mut cfg = EnvConfig::new(TaskKind::DrawerOpening);
+    cfg.camera = equiarm_sim::ViewPreset::Angle30.config();
+    cfg.corruption.random_reflection = true;
+    let text = serde_json::to_string(&cfg).unwrap();
+    let back: EnvConfig = serde_json::from_str(&text).unwrap();
+    assert_eq!(back, cfg);
+    let partial: EnvConfig =
+        serde_json::from_str(r#"{"task": "block_in_bowl", "params": {"substeps": 30}}"#).unwrap();
+    assert_eq!(partial.task, TaskKind::BlockInBowl);
+    assert_eq!(partial.params.substeps, 30);
+    assert_eq!(partial.params.dt, equiarm_sim::SimParams::default().dt);
+    let err =
+        serde_json::from_str::<EnvConfig>(r#"{"task": "block_picking", "params": {"substep": 3}}"#)
+            .unwrap_err();
+    assert!(err.to_string().contains("substep"), "{err}");
+}
