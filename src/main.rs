@@ -22,6 +22,75 @@ enum Command {
     /// Topics: print a topic's messages.
     #[command(subcommand)]
     Topic(TopicCommand),
+    /// Records topics into a rosbag2-compatible MCAP bag until Ctrl-C (the recorder node).
+    Record(RecordArgs),
+    /// Bags: describe, evaluate, repair.
+    #[command(subcommand)]
+    Bag(BagCommand),
+}
+
+#[derive(clap::Args)]
+struct RecordArgs {
+    /// Bag directory to create (must not exist, or be empty).
+    #[arg(short, long)]
+    output: std::path::PathBuf,
+    /// Topics to record, as TOPIC:TYPE (e.g. /env0/observation:equiarm_msgs/msg/Observation).
+    topics: Vec<String>,
+    /// Also record every topic of a known type that appears on the graph (checked every second).
+    #[arg(short, long)]
+    all: bool,
+    /// Chunk compression.
+    #[arg(long, value_enum, default_value = "zstd")]
+    compression: CompressionArg,
+    /// Start a new file after this many MB of messages.
+    #[arg(long)]
+    split_size_mb: Option<u64>,
+    /// Start a new file after this many seconds.
+    #[arg(long)]
+    split_duration_s: Option<u64>,
+    /// Flush interval in ms: a killed recorder loses at most about this much.
+    #[arg(long, default_value_t = 250)]
+    flush_ms: u64,
+    /// Stop after this many seconds (default: until Ctrl-C / SIGTERM).
+    #[arg(long)]
+    duration_s: Option<f64>,
+    /// No live status line.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum CompressionArg {
+    None,
+    Lz4,
+    Zstd,
+}
+
+#[derive(Subcommand)]
+enum BagCommand {
+    /// Files, duration, topics with types, counts and sizes (like `ros2 bag info`).
+    Info {
+        /// Bag directory or .mcap file.
+        bag: std::path::PathBuf,
+    },
+    /// Per-episode success and returns, success rates with Wilson 95 % intervals.
+    Eval {
+        /// Bag directory or .mcap file.
+        bag: std::path::PathBuf,
+        /// Discount for episodes reconstructed from transitions.
+        #[arg(long, default_value_t = 0.99)]
+        gamma: f64,
+        /// Print JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Rewrites a bag whose recorder was killed as a complete, indexed bag.
+    Recover {
+        /// The damaged bag directory or .mcap file.
+        input: std::path::PathBuf,
+        /// The new bag directory.
+        output: std::path::PathBuf,
+    },
 }
 
 #[derive(Subcommand)]
@@ -89,6 +158,55 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 rt.block_on(echo::<M>(&opts, &topic, qos, count, std::io::stdout().lock()))
             })??;
             log::info!("printed {n} messages from {topic}");
+        }
+        Command::Record(a) => {
+            let mut topics = Vec::new();
+            for t in &a.topics {
+                let Some((name, ty)) = t.split_once(':') else {
+                    bail!("topic '{t}' must be given as TOPIC:TYPE, e.g. /env0/observation:equiarm_msgs/msg/Observation");
+                };
+                topics.push((name.to_string(), ty.to_string()));
+            }
+            let writer = equiarm_bag::WriterOptions {
+                compression: match a.compression {
+                    CompressionArg::None => equiarm_bag::Compression::None,
+                    CompressionArg::Lz4 => equiarm_bag::Compression::Lz4,
+                    CompressionArg::Zstd => equiarm_bag::Compression::Zstd,
+                },
+                split_bytes: a.split_size_mb.map(|m| m * 1_000_000),
+                split_duration: a.split_duration_s.map(|s| s * 1_000_000_000),
+                flush_interval: a.flush_ms * 1_000_000,
+                ..Default::default()
+            };
+            let cfg = equiarm_nodes::recorder::RecordConfig {
+                output: a.output,
+                topics,
+                all: a.all,
+                writer,
+                status_every: (!a.quiet).then(|| std::time::Duration::from_secs(1)),
+                duration: a.duration_s.map(std::time::Duration::from_secs_f64),
+            };
+            let opts = RosOptions::from_env()?;
+            runtime()?.block_on(equiarm_nodes::recorder::run(&opts, cfg))?;
+        }
+        Command::Bag(BagCommand::Info { bag }) => {
+            let info = equiarm_bag::Reader::open(&bag)?.info()?;
+            print!("{}", equiarm_nodes::bag_tools::info_text(&bag, &info));
+        }
+        Command::Bag(BagCommand::Eval { bag, gamma, json }) => {
+            let report = equiarm_nodes::bag_tools::eval(&bag, gamma)?;
+            if json {
+                println!("{}", report.json()?);
+            } else {
+                print!("{}", report.table());
+            }
+        }
+        Command::Bag(BagCommand::Recover { input, output }) => {
+            let r = equiarm_bag::recover(&input, &output, equiarm_bag::WriterOptions::default())?;
+            for (p, why) in &r.truncated {
+                eprintln!("{}: read up to the last complete chunk ({why})", p.display());
+            }
+            println!("recovered {} messages into {}", r.summary.messages, r.summary.dir.display());
         }
     }
     Ok(())

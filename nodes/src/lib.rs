@@ -4,3 +4,5 @@
 
 pub mod ros;
 pub mod echo;
+pub mod recorder;
+pub mod bag_tools;

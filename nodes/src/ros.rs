@@ -184,6 +184,15 @@ impl RosNode {
         Ok(Subscriber { inner, topic: topic.to_string(), log: self.bad_input.clone(), _m: PhantomData })
     }
 
+    /// Topics seen on the graph so far (DDS names and type names, e.g. `rt/env0/observation`,
+    /// `equiarm_msgs::msg::dds_::Observation_`), one entry per topic.
+    pub fn discovered_topics(&self) -> Vec<ros2_client::DiscoveredTopic> {
+        let mut v = self.context.discovered_topics();
+        v.sort_by(|a, b| (&a.name, &a.type_name).cmp(&(&b.name, &b.type_name)));
+        v.dedup_by(|a, b| a.name == b.name && a.type_name == b.type_name);
+        v
+    }
+
     /// Payloads dropped because they did not decode, per topic, since the node started.
     pub fn bad_input_counts(&self) -> HashMap<String, u64> {
         self.bad_input.counts()

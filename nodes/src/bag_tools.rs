@@ -1,0 +1,158 @@
+//! `equiarm bag info | eval | recover`: the bag tools' terminal output (the work is in `equiarm_bag`).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::Context as _;
+use equiarm_bag::eval::{EpisodeCollector, GroupStats, summarize};
+use equiarm_bag::{BagInfo, ReadMode, Reader};
+use equiarm_msgs::msg::{EpisodeResult, Transition};
+use equiarm_msgs::{RosMessage, cdr};
+
+fn secs(ns: u64) -> f64 {
+    ns as f64 / 1e9
+}
+
+/// `ros2 bag info`-style text of a bag.
+pub fn info_text(path: &Path, info: &BagInfo) -> String {
+    let mut s = String::new();
+    let size: u64 = info.files.iter().map(|f| f.size).sum();
+    let _ = writeln!(s, "Bag:          {}", path.display());
+    let _ = writeln!(s, "Files:        {}", info.files.len());
+    for f in &info.files {
+        let state = if f.complete { "complete" } else { "TRUNCATED (run `equiarm bag recover`)" };
+        let comp = if f.compression.is_empty() { "none" } else { &f.compression };
+        let _ = writeln!(
+            s,
+            "              {} ({:.1} MiB, {} messages, compression {comp}, {state})",
+            f.path.file_name().unwrap_or_default().to_string_lossy(),
+            f.size as f64 / (1 << 20) as f64,
+            f.messages
+        );
+    }
+    let _ = writeln!(s, "Size:         {:.1} MiB", size as f64 / (1 << 20) as f64);
+    let _ = writeln!(s, "Duration:     {:.3} s", secs(info.end.saturating_sub(info.start)));
+    let _ = writeln!(s, "Start:        {:.3} s since the epoch", secs(info.start));
+    let _ = writeln!(s, "End:          {:.3} s since the epoch", secs(info.end));
+    let _ = writeln!(s, "Messages:     {}", info.messages);
+    let _ = writeln!(s, "Topics:");
+    for (name, t) in &info.topics {
+        let _ = writeln!(
+            s,
+            "  {name:<40} {:<34} {:>8} msgs {:>10.1} KiB",
+            t.type_name,
+            t.count,
+            t.bytes as f64 / 1024.0
+        );
+    }
+    s
+}
+
+/// Reads a bag's episodes (`EpisodeResult`s, or reconstructed from `Transition`s) and summarises them.
+pub fn eval(path: &Path, gamma: f64) -> anyhow::Result<EvalReport> {
+    let reader = Reader::open(path)?;
+    let mut c = EpisodeCollector::new(gamma);
+    let mut bad = 0u64;
+    let report = reader.for_each(ReadMode::Salvage, |m| {
+        if m.type_name == EpisodeResult::TYPE_NAME {
+            match cdr::decode::<EpisodeResult>(m.data) {
+                Ok(r) => c.add_result(&r),
+                Err(_) => bad += 1,
+            }
+        } else if m.type_name == Transition::TYPE_NAME {
+            match cdr::decode::<Transition>(m.data) {
+                Ok(t) => c.add_transition(&t),
+                Err(_) => bad += 1,
+            }
+        }
+        Ok::<(), std::convert::Infallible>(())
+    })?;
+    let report = report.unwrap_or_else(|e| match e {});
+    let (episodes, reconstructed, unfinished) = c.finish();
+    Ok(EvalReport {
+        groups: summarize(&episodes),
+        episodes: episodes.len(),
+        reconstructed,
+        unfinished,
+        undecodable: bad,
+        truncated: report.truncated.iter().map(|(p, r)| format!("{}: {r}", p.display())).collect(),
+    })
+}
+
+/// What `equiarm bag eval` reports.
+pub struct EvalReport {
+    /// Per (env, eval, expert) groups and all-env totals (`env == "*"`).
+    pub groups: Vec<GroupStats>,
+    /// Episodes found.
+    pub episodes: usize,
+    /// Episodes were reconstructed from transitions (the bag had no `EpisodeResult`).
+    pub reconstructed: bool,
+    /// Episodes still running when the recording ended (reconstruction only).
+    pub unfinished: usize,
+    /// Messages that did not decode as their type.
+    pub undecodable: u64,
+    /// Damaged files (read as far as possible).
+    pub truncated: Vec<String>,
+}
+
+impl EvalReport {
+    /// A table for the terminal.
+    pub fn table(&self) -> String {
+        let mut s = String::new();
+        let src = if self.reconstructed { "reconstructed from Transition" } else { "from EpisodeResult" };
+        let _ = writeln!(s, "{} episodes ({src})", self.episodes);
+        let _ = writeln!(
+            s,
+            "{:<8} {:<6} {:<7} {:>5} {:>8} {:>17} {:>9} {:>10} {:>7}",
+            "env", "mode", "actor", "n", "success", "95% CI (Wilson)", "return", "disc.ret", "steps"
+        );
+        for g in &self.groups {
+            let _ = writeln!(
+                s,
+                "{:<8} {:<6} {:<7} {:>5} {:>8.3} {:>8.3}..{:<7.3} {:>9.3} {:>10.3} {:>7.1}",
+                g.env,
+                if g.eval { "eval" } else { "train" },
+                if g.expert { "expert" } else { "policy" },
+                g.success.n,
+                g.success.rate,
+                g.success.lo,
+                g.success.hi,
+                g.mean_return,
+                g.mean_discounted_return,
+                g.mean_steps
+            );
+        }
+        if self.unfinished > 0 {
+            let _ = writeln!(s, "({} unfinished episodes not counted)", self.unfinished);
+        }
+        if self.undecodable > 0 {
+            let _ = writeln!(s, "({} messages did not decode and were skipped)", self.undecodable);
+        }
+        for t in &self.truncated {
+            let _ = writeln!(s, "(damaged file read up to its last complete chunk: {t})");
+        }
+        s
+    }
+
+    /// The same as JSON (NaN rates of empty groups become null).
+    pub fn json(&self) -> anyhow::Result<String> {
+        let groups: Vec<_> = self
+            .groups
+            .iter()
+            .map(|g| {
+                serde_json::json!({
+                    "env": g.env, "eval": g.eval, "expert": g.expert, "episodes": g.success.n,
+                    "successes": g.success.successes, "success_rate": g.success.rate,
+                    "success_ci95": [g.success.lo, g.success.hi], "mean_return": g.mean_return,
+                    "mean_discounted_return": g.mean_discounted_return, "mean_steps": g.mean_steps,
+                })
+            })
+            .collect();
+        let v = serde_json::json!({
+            "episodes": self.episodes, "reconstructed_from_transitions": self.reconstructed,
+            "unfinished": self.unfinished, "undecodable": self.undecodable, "truncated": self.truncated,
+            "groups": groups,
+        });
+        serde_json::to_string_pretty(&v).context("formatting JSON")
+    }
+}
