@@ -85,6 +85,7 @@ fn subscribe(
     name: &str,
     type_name: &str,
     tx: &mpsc::Sender<Sample>,
+    tasks: &mut Vec<tokio::task::JoinHandle<()>>,
 ) -> anyhow::Result<()> {
     let (profile, offered) = qos_for(type_name);
     crate::with_message_type!(type_name, M => {
@@ -92,11 +93,11 @@ fn subscribe(
         let sub = node.subscription::<M>(name, profile)?;
         let tx = tx.clone();
         let task_name = name.to_string();
-        tokio::spawn(async move {
+        tasks.push(tokio::spawn(async move {
             if let Err(e) = forward(sub, topic, tx).await {
                 warn!("recording {task_name} stopped: {e:#}");
             }
-        });
+        }));
         info!("recording {name} ({type_name})");
     })?;
     Ok(())
@@ -126,8 +127,9 @@ pub async fn run(opts: &RosOptions, cfg: RecordConfig) -> anyhow::Result<equiarm
     let mut node = RosNode::new("/", "equiarm_recorder", opts)?;
     let (tx, mut rx) = mpsc::channel::<Sample>(4096);
     let mut recording: HashSet<String> = HashSet::new();
+    let mut tasks = Vec::new();
     for (name, type_name) in &cfg.topics {
-        subscribe(&mut node, &mut writer, name, type_name, &tx)?;
+        subscribe(&mut node, &mut writer, name, type_name, &tx, &mut tasks)?;
         recording.insert(name.clone());
     }
     let signal = shutdown_signal();
@@ -159,7 +161,7 @@ pub async fn run(opts: &RosOptions, cfg: RecordConfig) -> anyhow::Result<equiarm
                     for t in node.discovered_topics() {
                         if let Some((name, type_name)) = ros_topic(&t.name, &t.type_name) {
                             if recording.insert(name.clone()) {
-                                subscribe(&mut node, &mut writer, &name, type_name, &tx)?;
+                                subscribe(&mut node, &mut writer, &name, type_name, &tx, &mut tasks)?;
                             }
                         }
                     }
@@ -177,6 +179,13 @@ pub async fn run(opts: &RosOptions, cfg: RecordConfig) -> anyhow::Result<equiarm
         }
     }
     drop(tx);
+    // stop the subscriptions before the node goes (RustDDS complains about readers outliving it)
+    for t in &tasks {
+        t.abort();
+    }
+    for t in tasks {
+        let _ = t.await;
+    }
     // drain what is already queued, then finish
     while let Ok(sample) = rx.try_recv() {
         writer.write(sample.topic, sample.log_time, sample.publish_time, &sample.data)?;
@@ -185,6 +194,7 @@ pub async fn run(opts: &RosOptions, cfg: RecordConfig) -> anyhow::Result<equiarm
         eprintln!();
     }
     let summary = writer.finish()?;
+    drop(node);
     info!("bag {} finished: {} messages in {} file(s)", summary.dir.display(), summary.messages, summary.files.len());
     Ok(summary)
 }
