@@ -84,6 +84,21 @@ enum BagCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Re-publishes a bag's messages on their topics at the recorded pace (like `ros2 bag play`).
+    Play {
+        /// Bag directory or .mcap file.
+        bag: std::path::PathBuf,
+        /// Speed factor (2 = twice as fast; 0 = as fast as possible).
+        #[arg(long, default_value_t = 1.0)]
+        rate: f64,
+        /// Publish topic FROM on TO instead, given as FROM:TO (repeatable).
+        #[arg(long = "remap", value_name = "FROM:TO")]
+        remaps: Vec<String>,
+        /// Milliseconds to wait after creating publishers before the first message, so subscribers
+        /// can match.
+        #[arg(long, default_value_t = 1000)]
+        wait_ms: u64,
+    },
     /// Rewrites a bag whose recorder was killed as a complete, indexed bag.
     Recover {
         /// The damaged bag directory or .mcap file.
@@ -200,6 +215,22 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             } else {
                 print!("{}", report.table());
             }
+        }
+        Command::Bag(BagCommand::Play { bag, rate, remaps, wait_ms }) => {
+            let mut pairs = Vec::new();
+            for r in &remaps {
+                let Some((from, to)) = r.split_once(':') else { bail!("remap '{r}' must be FROM:TO") };
+                pairs.push((from.to_string(), to.to_string()));
+            }
+            let cfg = equiarm_nodes::player::PlayConfig {
+                bag,
+                rate,
+                remaps: pairs,
+                wait_for_match: std::time::Duration::from_millis(wait_ms),
+            };
+            let opts = RosOptions::from_env()?;
+            let (published, skipped) = runtime()?.block_on(equiarm_nodes::player::run(&opts, cfg))?;
+            println!("published {published} messages ({skipped} skipped)");
         }
         Command::Bag(BagCommand::Recover { input, output }) => {
             let r = equiarm_bag::recover(&input, &output, equiarm_bag::WriterOptions::default())?;

@@ -6,3 +6,4 @@ pub mod ros;
 pub mod echo;
 pub mod recorder;
 pub mod bag_tools;
+pub mod player;

@@ -1,0 +1,145 @@
+//! `equiarm bag play`: re-publishes a bag's messages on their recorded topics (or remapped ones) at
+//! the recorded pace scaled by `--rate`, with each topic's recorded QoS reliability.
+//!
+//! ## Limitations
+//! Only types equiarm knows can be played (`equiarm msg list`); messages of other types are counted
+//! and skipped. Messages go out in file order (the order they were received when recorded).
+
+use std::collections::HashMap;
+use std::future::Future;
+use std::path::PathBuf;
+use std::pin::Pin;
+use std::time::{Duration, Instant};
+
+use anyhow::bail;
+use equiarm_bag::{ReadMode, Reader};
+use equiarm_msgs::{RosMessage, cdr};
+use log::{info, warn};
+
+use crate::ros::{Publisher, RosNode, RosOptions, qos, shutdown_signal};
+
+/// What to play and how.
+#[derive(Clone, Debug)]
+pub struct PlayConfig {
+    /// Bag directory or `.mcap` file.
+    pub bag: PathBuf,
+    /// Speed factor: 2.0 plays twice as fast; 0 or less means as fast as possible.
+    pub rate: f64,
+    /// Topic remaps `from -> to`.
+    pub remaps: Vec<(String, String)>,
+    /// Seconds to wait after creating publishers, so subscribers can match before the first message.
+    pub wait_for_match: Duration,
+}
+
+type PublishFuture<'a> = Pin<Box<dyn Future<Output = anyhow::Result<()>> + Send + 'a>>;
+
+/// A publisher that takes CDR bytes.
+trait RawPublisher: Send + Sync {
+    fn publish_cdr<'a>(&'a self, data: &'a [u8]) -> PublishFuture<'a>;
+}
+
+impl<M: RosMessage> RawPublisher for Publisher<M> {
+    fn publish_cdr<'a>(&'a self, data: &'a [u8]) -> PublishFuture<'a> {
+        Box::pin(async move {
+            let msg = cdr::decode::<M>(data)?;
+            self.publish(msg).await
+        })
+    }
+}
+
+/// Best effort if every recorded publisher offered best effort (integer-enum YAML `reliability: 2`,
+/// or Jazzy's `best_effort`), else reliable.
+fn recorded_best_effort(offered_qos: &str) -> bool {
+    let values: Vec<&str> =
+        offered_qos.lines().filter_map(|l| l.trim().strip_prefix("reliability:")).map(str::trim).collect();
+    !values.is_empty() && values.iter().all(|v| *v == "2" || *v == "best_effort")
+}
+
+/// Plays the bag once; returns (published, skipped) counts.
+pub async fn run(opts: &RosOptions, cfg: PlayConfig) -> anyhow::Result<(u64, u64)> {
+    let reader = Reader::open(&cfg.bag)?;
+    let info = reader.info()?;
+    if info.messages == 0 {
+        bail!("{}: the bag holds no messages", cfg.bag.display());
+    }
+    let mut node = RosNode::new("/", "equiarm_player", opts)?;
+    let mut publishers: HashMap<String, Box<dyn RawPublisher>> = HashMap::new();
+    for (topic, t) in &info.topics {
+        let to = cfg.remaps.iter().find(|(from, _)| from == topic).map(|(_, to)| to.clone()).unwrap_or(topic.clone());
+        let profile = if recorded_best_effort(&t.offered_qos) { qos::sensor_data() } else { qos::stream(100) };
+        let made: anyhow::Result<Box<dyn RawPublisher>> = crate::with_message_type!(&t.type_name, M => {
+            Box::new(node.publisher::<M>(&to, profile)?) as Box<dyn RawPublisher>
+        });
+        match made {
+            Ok(p) => {
+                info!("playing {topic} ({}) on {to}", t.type_name);
+                publishers.insert(topic.clone(), p);
+            }
+            Err(e) => warn!("skipping {topic}: {e:#}"),
+        }
+    }
+    tokio::time::sleep(cfg.wait_for_match).await;
+
+    // Read the bag in a blocking task and hand messages over a bounded channel (back-pressure keeps
+    // memory flat for big bags).
+    let (tx, mut rx) = tokio::sync::mpsc::channel::<(String, u64, Vec<u8>)>(256);
+    let bag = cfg.bag.clone();
+    let reading = tokio::task::spawn_blocking(move || {
+        let reader = Reader::open(&bag)?;
+        reader
+            .for_each(ReadMode::Salvage, |m| tx.blocking_send((m.topic.to_string(), m.log_time, m.data.to_vec())))?
+            .ok();
+        Ok::<(), anyhow::Error>(())
+    });
+    let signal = shutdown_signal();
+    tokio::pin!(signal);
+    let (mut published, mut skipped) = (0u64, 0u64);
+    let start = Instant::now();
+    let t0 = info.start;
+    loop {
+        let next = tokio::select! {
+            s = &mut signal => { info!("{} received, stopping playback", s?); break; }
+            m = rx.recv() => m,
+        };
+        let Some((topic, log_time, data)) = next else { break };
+        let Some(p) = publishers.get(&topic) else {
+            skipped += 1;
+            continue;
+        };
+        if cfg.rate > 0.0 {
+            let due = Duration::from_secs_f64(log_time.saturating_sub(t0) as f64 / 1e9 / cfg.rate);
+            if let Some(wait) = due.checked_sub(start.elapsed()) {
+                tokio::time::sleep(wait).await;
+            }
+        }
+        match p.publish_cdr(&data).await {
+            Ok(()) => published += 1,
+            Err(e) => {
+                skipped += 1;
+                warn!("{topic}: {e:#}");
+            }
+        }
+    }
+    drop(rx);
+    reading.await??;
+    // give reliable subscribers a moment to receive the tail before the node goes away
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    drop(publishers);
+    drop(node);
+    Ok((published, skipped))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use equiarm_bag::qos::{OfferedQos, offered_qos_yaml};
+
+    #[test]
+    fn recorded_reliability_is_read_from_both_yaml_forms() {
+        assert!(recorded_best_effort(&offered_qos_yaml(&[OfferedQos::best_effort(1)])));
+        assert!(!recorded_best_effort(&offered_qos_yaml(&[OfferedQos::reliable(10)])));
+        assert!(!recorded_best_effort(&offered_qos_yaml(&[OfferedQos::best_effort(1), OfferedQos::reliable(1)])));
+        assert!(recorded_best_effort("- history: unknown\n  reliability: best_effort\n"));
+        assert!(!recorded_best_effort(""));
+    }
+}
