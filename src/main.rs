@@ -98,6 +98,10 @@ enum BagCommand {
         /// can match.
         #[arg(long, default_value_t = 1000)]
         wait_ms: u64,
+        /// Lock-step: after each Observation wait for the GripperCommand naming its seq on the sibling
+        /// gripper_cmd topic (re-publishing every this many ms), instead of the recorded pace.
+        #[arg(long, value_name = "MS")]
+        lockstep: Option<u64>,
     },
     /// Rewrites a bag whose recorder was killed as a complete, indexed bag.
     Recover {
@@ -216,7 +220,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 print!("{}", report.table());
             }
         }
-        Command::Bag(BagCommand::Play { bag, rate, remaps, wait_ms }) => {
+        Command::Bag(BagCommand::Play { bag, rate, remaps, wait_ms, lockstep }) => {
             let mut pairs = Vec::new();
             for r in &remaps {
                 let Some((from, to)) = r.split_once(':') else { bail!("remap '{r}' must be FROM:TO") };
@@ -227,6 +231,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 rate,
                 remaps: pairs,
                 wait_for_match: std::time::Duration::from_millis(wait_ms),
+                lockstep: lockstep.map(std::time::Duration::from_millis),
             };
             let opts = RosOptions::from_env()?;
             let (published, skipped) = runtime()?.block_on(equiarm_nodes::player::run(&opts, cfg))?;

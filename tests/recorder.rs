@@ -9,7 +9,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use equiarm_bag::{ReadMode, Reader};
-use equiarm_msgs::msg::{EpisodeResult, GripperCommand};
+use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation};
 use equiarm_msgs::sensor_msgs::Image;
 use equiarm_msgs::{RosMessage, cdr};
 use equiarm_nodes::ros::{RosNode, RosOptions, qos};
@@ -224,4 +224,53 @@ fn bag_play_republishes_every_message_in_order_on_remapped_topics() {
     std::io::Read::read_to_string(&mut play.stdout.take().unwrap(), &mut out).unwrap();
     assert!(out.contains("published 20 messages (0 skipped)"), "{out}");
     assert_eq!(got, (0..20).map(cmd).collect::<Vec<_>>());
+}
+
+#[test]
+fn bag_play_lockstep_waits_for_the_command_naming_each_observation() {
+    use equiarm_bag::qos::OfferedQos;
+    use equiarm_bag::{TopicInfo, Writer, WriterOptions};
+    let dir = support::scratch("recorder_lockstep");
+    let bag = dir.join("obs");
+    let mut w = Writer::create(&bag, WriterOptions::default()).unwrap();
+    let o = w.add_topic(TopicInfo::of::<Observation>("/env0/observation", &[OfferedQos::reliable(10)])).unwrap();
+    let t0 = 1_700_000_000_000_000_000u64;
+    for seq in 10..15u64 {
+        // recorded an hour apart: lock-step must not keep that pace
+        w.write(o, t0 + (seq - 10) * 3_600_000_000_000, t0, &cdr::encode(&observation(seq, 4, 1)).unwrap()).unwrap();
+    }
+    w.finish().unwrap();
+
+    let mut play = equiarm()
+        .args(["bag", "play", "--lockstep", "300", "--wait-ms", "2000", "--remap", "/env0/observation:/ls/observation"])
+        .arg(&bag)
+        .env("ROS_DOMAIN_ID", "84")
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let seen = rt.block_on(async {
+        let mut node = RosNode::new("/", "policy", &RosOptions { domain_id: 84, localhost_only: false }).unwrap();
+        let sub = node.subscription::<Observation>("/ls/observation", qos::command()).unwrap();
+        let cmds = node.publisher::<GripperCommand>("/ls/gripper_cmd", qos::command()).unwrap();
+        let mut seen = Vec::new();
+        let mut snubbed = false;
+        let start = Instant::now();
+        while seen.last() != Some(&14) && start.elapsed() < Duration::from_secs(25) {
+            let Some((obs, _)) = sub.recv_timeout(Duration::from_millis(500)).await.unwrap() else { continue };
+            seen.push(obs.seq);
+            if obs.seq == 12 && !snubbed {
+                snubbed = true; // no answer: the player must publish seq 12 again
+                continue;
+            }
+            cmds.publish(cmd(obs.seq)).await.unwrap();
+        }
+        seen
+    });
+    let status = wait_exit(&mut play, 20);
+    assert!(status.success());
+    let mut out = String::new();
+    std::io::Read::read_to_string(&mut play.stdout.take().unwrap(), &mut out).unwrap();
+    assert!(out.contains("published 5 messages (0 skipped)"), "{out}");
+    assert_eq!(seen, [10, 11, 12, 12, 13, 14], "observations as the policy saw them");
 }

@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::bail;
 use equiarm_bag::{ReadMode, Reader};
+use equiarm_msgs::msg::{GripperCommand, Observation};
 use equiarm_msgs::{RosMessage, cdr};
 use log::{info, warn};
 
@@ -29,6 +30,10 @@ pub struct PlayConfig {
     pub remaps: Vec<(String, String)>,
     /// Seconds to wait after creating publishers, so subscribers can match before the first message.
     pub wait_for_match: Duration,
+    /// Lock-step: after each `Observation` (on `.../observation`), wait for the `GripperCommand` on the
+    /// sibling `.../gripper_cmd` that names its seq (re-publishing every this long, at most 10 times),
+    /// instead of keeping the recorded pace. Drives a policy node from a bag as fast as it answers.
+    pub lockstep: Option<Duration>,
 }
 
 type PublishFuture<'a> = Pin<Box<dyn Future<Output = anyhow::Result<()>> + Send + 'a>>;
@@ -45,6 +50,23 @@ impl<M: RosMessage> RawPublisher for Publisher<M> {
             self.publish(msg).await
         })
     }
+}
+
+fn remap(remaps: &[(String, String)], topic: &str) -> String {
+    remaps.iter().find(|(from, _)| from == topic).map(|(_, to)| to.clone()).unwrap_or_else(|| topic.to_string())
+}
+
+/// Waits up to `timeout` for a command naming `seq` (commands for other seqs are ignored).
+async fn wait_for_answer(sub: &crate::ros::Subscriber<GripperCommand>, seq: u64, timeout: Duration) -> anyhow::Result<bool> {
+    let deadline = Instant::now() + timeout;
+    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+        match sub.recv_timeout(left).await? {
+            Some((c, _)) if c.obs_seq == seq => return Ok(true),
+            Some(_) => continue,
+            None => break,
+        }
+    }
+    Ok(false)
 }
 
 /// Best effort if every recorded publisher offered best effort (integer-enum YAML `reliability: 2`,
@@ -65,7 +87,7 @@ pub async fn run(opts: &RosOptions, cfg: PlayConfig) -> anyhow::Result<(u64, u64
     let mut node = RosNode::new("/", "equiarm_player", opts)?;
     let mut publishers: HashMap<String, Box<dyn RawPublisher>> = HashMap::new();
     for (topic, t) in &info.topics {
-        let to = cfg.remaps.iter().find(|(from, _)| from == topic).map(|(_, to)| to.clone()).unwrap_or(topic.clone());
+        let to = remap(&cfg.remaps, topic);
         let profile = if recorded_best_effort(&t.offered_qos) { qos::sensor_data() } else { qos::stream(100) };
         let made: anyhow::Result<Box<dyn RawPublisher>> = crate::with_message_type!(&t.type_name, M => {
             Box::new(node.publisher::<M>(&to, profile)?) as Box<dyn RawPublisher>
@@ -76,6 +98,19 @@ pub async fn run(opts: &RosOptions, cfg: PlayConfig) -> anyhow::Result<(u64, u64
                 publishers.insert(topic.clone(), p);
             }
             Err(e) => warn!("skipping {topic}: {e:#}"),
+        }
+    }
+    // lock-step: one command subscription per observation topic
+    let mut answers: HashMap<String, crate::ros::Subscriber<GripperCommand>> = HashMap::new();
+    if cfg.lockstep.is_some() {
+        for (topic, t) in &info.topics {
+            if t.type_name == Observation::TYPE_NAME {
+                let to = remap(&cfg.remaps, topic);
+                let Some(base) = to.strip_suffix("observation") else { continue };
+                let cmd_topic = format!("{base}gripper_cmd");
+                answers.insert(topic.clone(), node.subscription::<GripperCommand>(&cmd_topic, qos::command())?);
+                info!("lock-step: {to} waits for {cmd_topic}");
+            }
         }
     }
     tokio::time::sleep(cfg.wait_for_match).await;
@@ -106,6 +141,24 @@ pub async fn run(opts: &RosOptions, cfg: PlayConfig) -> anyhow::Result<(u64, u64
             skipped += 1;
             continue;
         };
+        if let (Some(every), Some(sub)) = (cfg.lockstep, answers.get(&topic)) {
+            let seq = cdr::decode::<Observation>(&data)?.seq;
+            let mut answered = false;
+            for _ in 0..10 {
+                p.publish_cdr(&data).await?;
+                if wait_for_answer(sub, seq, every).await? {
+                    answered = true;
+                    break;
+                }
+            }
+            if answered {
+                published += 1;
+            } else {
+                skipped += 1;
+                warn!("{topic}: no gripper command for seq {seq} after 10 tries; going on");
+            }
+            continue;
+        }
         if cfg.rate > 0.0 {
             let due = Duration::from_secs_f64(log_time.saturating_sub(t0) as f64 / 1e9 / cfg.rate);
             if let Some(wait) = due.checked_sub(start.elapsed()) {
