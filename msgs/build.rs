@@ -39,11 +39,10 @@ fn main() {
     }
     for spec in specs.values() {
         for f in &spec.fields {
-            if let Base::Msg(full) = &f.base {
-                if !specs.contains_key(full) {
+            if let Base::Msg(full) = &f.base
+                && !specs.contains_key(full) {
                     fail(&spec.path, f.line, &format!("unknown message type '{full}'"));
                 }
-            }
         }
     }
     let code = generate(&specs);

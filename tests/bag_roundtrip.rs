@@ -30,7 +30,7 @@ fn gripper(k: u32) -> GripperCommand {
 }
 
 fn episode(k: u32) -> EpisodeResult {
-    let success = k % 3 == 0;
+    let success = k.is_multiple_of(3);
     EpisodeResult {
         header: header(k as i32, 0, "world"),
         env: format!("env{}", k % 2),
@@ -41,7 +41,7 @@ fn episode(k: u32) -> EpisodeResult {
         success,
         ret: if success { 1.0 } else { 0.0 },
         discounted_return: 0.5,
-        expert: k % 2 == 0,
+        expert: k.is_multiple_of(2),
         eval: false,
     }
 }

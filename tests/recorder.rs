@@ -130,7 +130,7 @@ fn sigkill_loses_at_most_half_a_second_and_recover_makes_a_readable_bag() {
         let mut killed_at = None;
         while start.elapsed() < Duration::from_secs(4) {
             cmds.publish(cmd(k)).await.unwrap();
-            if k % 5 == 0 {
+            if k.is_multiple_of(5) {
                 imgs.publish(image.clone()).await.unwrap();
             }
             k += 1;

@@ -126,7 +126,7 @@ mod tests {
             let n: anyhow::Result<&str> = with_message_type!(t.type_name, M => M::TYPE_NAME);
             assert_eq!(n.unwrap(), t.type_name);
         }
-        let r: anyhow::Result<()> = with_message_type!("x/msg/Y", M => ());
+        let r: anyhow::Result<&str> = with_message_type!("x/msg/Y", M => M::NAME);
         assert!(r.unwrap_err().to_string().contains("unknown message type 'x/msg/Y'"));
     }
 }

@@ -159,22 +159,20 @@ pub async fn run(opts: &RosOptions, cfg: RecordConfig) -> anyhow::Result<equiarm
                 if cfg.all && last_discovery.elapsed() >= Duration::from_secs(1) {
                     last_discovery = Instant::now();
                     for t in node.discovered_topics() {
-                        if let Some((name, type_name)) = ros_topic(&t.name, &t.type_name) {
-                            if recording.insert(name.clone()) {
+                        if let Some((name, type_name)) = ros_topic(&t.name, &t.type_name)
+                            && recording.insert(name.clone()) {
                                 subscribe(&mut node, &mut writer, &name, type_name, &tx, &mut tasks)?;
                             }
-                        }
                     }
                 }
-                if let Some(every) = cfg.status_every {
-                    if last_status.elapsed() >= every {
+                if let Some(every) = cfg.status_every
+                    && last_status.elapsed() >= every {
                         let rate = (messages - since_count) as f64 / since.elapsed().as_secs_f64();
                         eprint!("\rrecording {}: {messages} messages, {:.1} MB, {rate:.0} msg/s   ",
                             cfg.output.display(), bytes as f64 / 1e6);
                         let _ = std::io::stderr().flush();
                         (since, since_count, last_status) = (Instant::now(), messages, Instant::now());
                     }
-                }
             }
         }
     }

@@ -70,6 +70,7 @@ pub mod qos {
 /// Where and how a node joins the ROS 2 graph. [`RosOptions::from_env`] reads the environment the
 /// way ROS 2 tools do; everything is also settable by hand (tests use their own domain ids).
 #[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Default)]
 pub struct RosOptions {
     /// DDS domain (ROS_DOMAIN_ID), 0..=232.
     pub domain_id: u16,
@@ -77,11 +78,6 @@ pub struct RosOptions {
     pub localhost_only: bool,
 }
 
-impl Default for RosOptions {
-    fn default() -> Self {
-        Self { domain_id: 0, localhost_only: false }
-    }
-}
 
 impl RosOptions {
     /// Reads `ROS_DOMAIN_ID`, `ROS_LOCALHOST_ONLY` and `ROS_AUTOMATIC_DISCOVERY_RANGE` (RustDDS ignores

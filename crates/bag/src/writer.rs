@@ -355,11 +355,10 @@ impl Writer {
 impl Drop for Writer {
     /// A writer dropped without [`Writer::finish`] (an error path, a panic) still finishes the bag.
     fn drop(&mut self) {
-        if !self.finished {
-            if let Err(e) = self.finish_inner() {
+        if !self.finished
+            && let Err(e) = self.finish_inner() {
                 log::error!("finishing bag {} on drop: {e}", self.dir.display());
             }
-        }
     }
 }
 
@@ -370,10 +369,9 @@ pub(crate) fn write_atomically(path: &Path, data: &[u8]) -> Result<(), BagError>
     f.write_all(data).map_err(BagError::io(&tmp))?;
     f.sync_all().map_err(BagError::io(&tmp))?;
     std::fs::rename(&tmp, path).map_err(BagError::io(path))?;
-    if let Some(dir) = path.parent() {
-        if let Ok(d) = File::open(dir) {
+    if let Some(dir) = path.parent()
+        && let Ok(d) = File::open(dir) {
             let _ = d.sync_all();
         }
-    }
     Ok(())
 }
