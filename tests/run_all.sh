@@ -17,7 +17,8 @@ echo "== build (target dir: $CARGO_TARGET_DIR)"
 cargo build --locked --workspace --all-targets
 cargo test --locked --workspace --no-run
 echo "== docs"
-RUSTDOCFLAGS="-D warnings" cargo doc --locked --workspace --no-deps --quiet
+# the message docs (every field with its unit) and the libraries; --no-deps keeps it to our crates
+RUSTDOCFLAGS="-D warnings" cargo doc --locked --no-deps --quiet -p equiarm_msgs -p equiarm_bag -p equiarm_nodes
 
 # A private network namespace: as root (CI) or through an unprivileged user namespace.
 ns=()
