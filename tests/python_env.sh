@@ -3,7 +3,8 @@
 # EQUIARM_PYTHON. The environment lives outside the clone, keyed by the requirements' hash, so fresh
 # clones on the same machine reuse it. Override its parent folder with EQUIARM_VENV_DIR.
 
-_req="$(git rev-parse --show-toplevel 2>/dev/null || pwd)/tests/python/requirements.txt"
+# EQUIARM_REQUIREMENTS picks another requirements file (the benchmarks' peers).
+_req="${EQUIARM_REQUIREMENTS:-$(git rev-parse --show-toplevel 2>/dev/null || pwd)/tests/python/requirements.txt}"
 _hash=$(sha256sum "$_req" | cut -c1-16)
 _venv="${EQUIARM_VENV_DIR:-$HOME/.cache/equiarm/venvs}/py-$_hash"
 if [ ! -f "$_venv/.complete" ]; then
