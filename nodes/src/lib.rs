@@ -4,3 +4,4 @@
 
 pub mod ros;
 pub mod echo;
+pub mod sim;
