@@ -22,6 +22,15 @@ enum Command {
     /// Topics: print a topic's messages.
     #[command(subcommand)]
     Topic(TopicCommand),
+    /// Simulated environment node: one of the paper's five tasks on the lock-step protocol.
+    ///
+    /// Publishes Observation on `observation` (relative to --namespace), waits for the GripperCommand
+    /// on `gripper_cmd` naming its seq, steps, publishes Transition on /transitions and, at episode end,
+    /// EpisodeResult on /episodes (discounted_return with gamma 0.99); camera images and CameraInfo on
+    /// `camera/...`. Commands for another seq are ignored; commands with NaN/inf are rejected (nothing
+    /// moves). Out-of-range values are clipped, as the paper's environments do: dx, dy, dz to
+    /// +-0.05 m, dtheta to +-pi/4 rad, open_ratio to [0, 1], and the target position to the workspace.
+    Sim(SimCommand),
     /// Records topics into a rosbag2-compatible MCAP bag until Ctrl-C (the recorder node).
     Record(RecordArgs),
     /// Bags: describe, evaluate, repair.
@@ -109,6 +118,37 @@ enum BagCommand {
         input: std::path::PathBuf,
         /// The new bag directory.
         output: std::path::PathBuf,
+    },
+}
+
+#[derive(clap::Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
+struct SimCommand {
+    #[command(subcommand)]
+    sub: Option<SimSubcommand>,
+    #[command(flatten)]
+    args: equiarm_nodes::sim::SimArgs,
+}
+
+#[derive(Subcommand)]
+enum SimSubcommand {
+    /// Writes the colour, depth (16-bit, mm) and segmentation PNGs of a task's reset scene.
+    Snapshot {
+        /// Task name (see `equiarm sim --help`).
+        #[arg(long)]
+        task: String,
+        /// Output folder (created if missing); files are `<task>_color.png`, `_depth.png`, `_seg.png`.
+        #[arg(long)]
+        out: std::path::PathBuf,
+        /// Seed of the reset.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Expert steps to take before the picture.
+        #[arg(long, default_value_t = 0)]
+        steps: u32,
+        /// Camera preset (side, angle15 … angle90).
+        #[arg(long)]
+        view: Option<String>,
     },
 }
 
@@ -243,6 +283,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 eprintln!("{}: read up to the last complete chunk ({why})", p.display());
             }
             println!("recovered {} messages into {}", r.summary.messages, r.summary.dir.display());
+        }
+        Command::Sim(SimCommand { sub: Some(SimSubcommand::Snapshot { task, out, seed, steps, view }), .. }) => {
+            for f in equiarm_nodes::sim::snapshot(&task, seed, steps, view.as_deref(), &out)? {
+                println!("{}", f.display());
+            }
+        }
+        Command::Sim(SimCommand { sub: None, args }) => {
+            let opts = RosOptions::from_env()?;
+            runtime()?.block_on(equiarm_nodes::sim::run(&args, &opts))?;
         }
     }
     Ok(())

@@ -7,3 +7,4 @@ pub mod echo;
 pub mod recorder;
 pub mod bag_tools;
 pub mod player;
+pub mod sim;

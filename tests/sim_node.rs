@@ -1,0 +1,219 @@
+//! `equiarm sim` over DDS: the binary is spawned for a task and driven from an in-test node acting
+//! as the expert policy (it echoes `expert_action` with the right `obs_seq`). Guards the lock-step
+//! protocol of ARCHITECTURE §2: seqs, re-publication on timeout, stale and non-finite commands
+//! ignored without a step, Transitions and EpisodeResults on the shared topics, camera topics.
+//! Domains 90–99 are this file's.
+
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, Transition};
+use equiarm_msgs::sensor_msgs::{CameraInfo, Image};
+use equiarm_nodes::ros::{RosNode, RosOptions, Subscriber, qos};
+
+/// Kills the sim if a test panics before it exits.
+struct Sim(Option<Child>);
+
+impl Sim {
+    fn spawn(domain: u16, namespace: &str, extra: &[&str]) -> Self {
+        let child = Command::new(env!("CARGO_BIN_EXE_equiarm"))
+            .args(["sim", "--task", "block_picking", "--namespace", namespace])
+            .args(extra)
+            .env("ROS_DOMAIN_ID", domain.to_string())
+            .env("RUST_LOG", "info,rustdds=off,ros2_client=off")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawning equiarm sim");
+        Sim(Some(child))
+    }
+
+    /// Waits (bounded) for the process to exit and returns its output.
+    fn wait(mut self, limit: Duration) -> Output {
+        let mut child = self.0.take().unwrap();
+        let start = Instant::now();
+        while child.try_wait().unwrap().is_none() {
+            if start.elapsed() > limit {
+                let _ = child.kill();
+                let out = child.wait_with_output().unwrap();
+                panic!("equiarm sim did not exit within {limit:?}:\n{}", String::from_utf8_lossy(&out.stderr));
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        child.wait_with_output().unwrap()
+    }
+
+    fn signal(&self, sig: &str) {
+        let pid = self.0.as_ref().unwrap().id().to_string();
+        assert!(Command::new("kill").args([&format!("-{sig}"), &pid]).status().unwrap().success());
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        if let Some(c) = self.0.as_mut() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+fn node(domain: u16, name: &str) -> RosNode {
+    RosNode::new("/", name, &RosOptions { domain_id: domain, localhost_only: false }).unwrap()
+}
+
+/// The expert's action for `obs`, as a policy node in expert mode sends it.
+fn expert_reply(obs: &Observation) -> GripperCommand {
+    GripperCommand { obs_seq: obs.seq, ..obs.expert_action.clone() }
+}
+
+async fn next<M: equiarm_msgs::RosMessage>(sub: &Subscriber<M>, within: Duration) -> Option<M> {
+    sub.recv_timeout(within).await.unwrap().map(|(m, _)| m)
+}
+
+#[test]
+fn an_expert_driver_gets_a_successful_episode_with_consistent_transitions_and_camera_frames() {
+    const DOMAIN: u16 = 90;
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let sim = rt.block_on(async {
+        let mut n = node(DOMAIN, "sim_test_expert");
+        let obs_sub = n.subscription::<Observation>("/st90/observation", qos::command()).unwrap();
+        let tr_sub = n.subscription::<Transition>("/transitions", qos::stream(100)).unwrap();
+        let ep_sub = n.subscription::<EpisodeResult>("/episodes", qos::stream(100)).unwrap();
+        let color_sub = n.subscription::<Image>("/st90/camera/color/image_raw", qos::sensor_data()).unwrap();
+        let depth_sub = n.subscription::<Image>("/st90/camera/depth/image_raw", qos::sensor_data()).unwrap();
+        let info_sub = n.subscription::<CameraInfo>("/st90/camera/camera_info", qos::sensor_data()).unwrap();
+        let cmd_pub = n.publisher::<GripperCommand>("/st90/gripper_cmd", qos::command()).unwrap();
+        let sim = Sim::spawn(DOMAIN, "/st90", &["--seed", "3", "--episodes", "1", "--timeout-ms", "300"]);
+
+        let (mut observations, mut transitions, mut colors, mut depths, mut infos) = (vec![], vec![], vec![], vec![], vec![]);
+        let mut result = None;
+        let deadline = Instant::now() + Duration::from_secs(30);
+        while result.is_none() && Instant::now() < deadline {
+            tokio::select! {
+                Some(o) = next(&obs_sub, Duration::from_millis(100)) => {
+                    cmd_pub.publish(expert_reply(&o)).await.unwrap();
+                    observations.push(o);
+                }
+                Some(t) = next(&tr_sub, Duration::from_millis(100)) => transitions.push(t),
+                Some(r) = next(&ep_sub, Duration::from_millis(100)) => result = Some(r),
+                Some(c) = next(&color_sub, Duration::from_millis(100)) => colors.push(c),
+                Some(d) = next(&depth_sub, Duration::from_millis(100)) => depths.push(d),
+                Some(i) = next(&info_sub, Duration::from_millis(100)) => infos.push(i),
+                else => {}
+            }
+        }
+        // Transitions published just before the result may still be on their way.
+        while let Some(t) = next(&tr_sub, Duration::from_millis(300)).await {
+            transitions.push(t);
+        }
+        let r = result.expect("no EpisodeResult within 30 s");
+        assert!(r.success && r.expert && !r.eval, "{r:?}");
+        assert_eq!((r.env.as_str(), r.task.as_str(), r.episode), ("st90", "block_picking", 0));
+        assert!(r.steps >= 2 && r.steps < 50, "{r:?}");
+        assert_eq!(r.ret, 1.0);
+        assert!((r.discounted_return - 0.99f32.powi(r.steps as i32 - 1)).abs() < 1e-5, "{r:?}");
+
+        // One Transition per step, in order, each obs answered by its action and followed by next_obs.
+        assert_eq!(transitions.len(), r.steps as usize, "{:?}", transitions.iter().map(|t| t.obs.seq).collect::<Vec<_>>());
+        for (k, t) in transitions.iter().enumerate() {
+            assert_eq!((t.obs.step, t.next_obs.step), (k as u32, k as u32 + 1));
+            assert_eq!((t.obs.seq, t.action.obs_seq, t.next_obs.seq), (k as u64, k as u64, k as u64 + 1));
+            assert_eq!(t.action.source, GripperCommand::SOURCE_EXPERT);
+            assert!(t.expert && t.obs.env == "st90" && t.header.stamp == t.next_obs.header.stamp);
+            assert!(t.next_obs.header.stamp.as_nanos() > t.obs.header.stamp.as_nanos(), "sim clock must advance");
+            let last = k + 1 == transitions.len();
+            assert_eq!((t.done, t.timeout, t.reward), (last, false, if last { 1.0 } else { 0.0 }));
+        }
+        // Observations: each seq once per publication (re-publications repeat it), steps 0.. in order.
+        let mut seqs: Vec<u64> = observations.iter().map(|o| o.seq).collect();
+        seqs.dedup();
+        assert_eq!(seqs, (0..r.steps as u64).collect::<Vec<_>>());
+        for o in &observations {
+            assert_eq!(o.expert_action.obs_seq, o.seq);
+            assert_eq!(o.expert_action.source, GripperCommand::SOURCE_EXPERT);
+            assert_eq!((o.color.encoding.as_str(), o.color.height, o.color.width), ("rgb8", 152, 152));
+            assert_eq!((o.depth.encoding.as_str(), o.depth.data.len()), ("32FC1", 152 * 152 * 4));
+            let depth = o.depth.float32_values().unwrap();
+            assert!(depth.iter().all(|d| (0.1..=3.0).contains(d)), "depth in metres within near..far");
+        }
+        assert!(transitions.iter().any(|t| t.next_obs.holding), "the expert picked the block");
+
+        // Camera topics: frames with the stamp of an observation (best effort: not every one arrives).
+        assert!(!colors.is_empty() && !depths.is_empty() && !infos.is_empty(), "{} {} {}", colors.len(), depths.len(), infos.len());
+        let stamps: Vec<_> = transitions.iter().flat_map(|t| [t.obs.header.stamp.clone(), t.next_obs.header.stamp.clone()]).collect();
+        for c in &colors {
+            assert!(stamps.contains(&c.header.stamp), "colour frame stamp {:?} is no observation's", c.header.stamp);
+            let o = transitions.iter().flat_map(|t| [&t.obs, &t.next_obs]).find(|o| o.header.stamp == c.header.stamp).unwrap();
+            assert_eq!(c.data, o.color.data, "camera frame = observation colour");
+        }
+        for d in &depths {
+            assert!(stamps.contains(&d.header.stamp));
+            assert_eq!(d.encoding, "32FC1");
+        }
+        let i = &infos[0];
+        assert_eq!((i.width, i.height), (152, 152));
+        assert!(i.k[0] > 0.0 && i.k[4] > 0.0 && i.k[8] == 1.0, "{:?}", i.k);
+        assert!(stamps.contains(&i.header.stamp));
+        sim
+    });
+    let out = sim.wait(Duration::from_secs(10));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "sim exited with {}:\n{stderr}", out.status);
+    assert!(stderr.contains("rejected: 0"), "{stderr}");
+}
+
+#[test]
+fn stale_and_non_finite_commands_are_ignored_and_the_observation_is_republished() {
+    const DOMAIN: u16 = 91;
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let sim = rt.block_on(async {
+        let mut n = node(DOMAIN, "sim_test_bad");
+        let obs_sub = n.subscription::<Observation>("/st91/observation", qos::command()).unwrap();
+        let tr_sub = n.subscription::<Transition>("/transitions", qos::stream(100)).unwrap();
+        let cmd_pub = n.publisher::<GripperCommand>("/st91/gripper_cmd", qos::command()).unwrap();
+        let sim = Sim::spawn(DOMAIN, "/st91", &["--seed", "5", "--timeout-ms", "200"]);
+
+        let first = next(&obs_sub, Duration::from_secs(20)).await.expect("no Observation within 20 s");
+        assert_eq!((first.seq, first.step, first.episode), (0, 0, 0));
+        // No answer: the same Observation comes again (same seq, same stamp).
+        let again = next(&obs_sub, Duration::from_secs(3)).await.expect("no re-publication within 3 s");
+        assert_eq!((again.seq, &again.header.stamp), (first.seq, &first.header.stamp));
+        assert!(n.wait_for_subscription(&cmd_pub, Duration::from_secs(5)).await, "sim never subscribed");
+        tokio::time::sleep(Duration::from_millis(300)).await;
+
+        // A command for another seq and one with NaN and inf: neither steps the env.
+        let mut stale = expert_reply(&first);
+        stale.obs_seq = first.seq + 7;
+        cmd_pub.publish(stale).await.unwrap();
+        let mut nan = expert_reply(&first);
+        (nan.dx, nan.dtheta) = (f32::NAN, f32::INFINITY);
+        cmd_pub.publish(nan).await.unwrap();
+        assert!(next(&tr_sub, Duration::from_millis(800)).await.is_none(), "a bad command stepped the env");
+        // Still alive and still waiting for seq 0.
+        let waiting = next(&obs_sub, Duration::from_secs(3)).await.expect("the sim stopped publishing");
+        assert_eq!(waiting.seq, first.seq);
+
+        // A good command steps exactly once from the reset state.
+        cmd_pub.publish(expert_reply(&first)).await.unwrap();
+        let t = next(&tr_sub, Duration::from_secs(5)).await.expect("no Transition for a good command");
+        assert_eq!((t.obs.seq, t.obs.step, t.next_obs.seq, t.next_obs.step), (0, 0, 1, 1));
+        assert_eq!(t.obs.header.stamp, first.header.stamp);
+        let deadline = Instant::now() + Duration::from_secs(3);
+        let mut seen_next = false;
+        while !seen_next && Instant::now() < deadline {
+            if let Some(o) = next(&obs_sub, Duration::from_millis(200)).await {
+                seen_next = o.seq == 1;
+            }
+        }
+        assert!(seen_next, "no Observation with seq 1 after the step");
+        sim
+    });
+    sim.signal("TERM");
+    let out = sim.wait(Duration::from_secs(10));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "sim exited with {} on SIGTERM:\n{stderr}", out.status);
+    assert!(stderr.contains("SIGTERM received"), "{stderr}");
+    assert!(stderr.contains("rejecting the command for obs_seq 0: non-finite dx=NaN, dtheta=inf"), "{stderr}");
+    assert!(stderr.contains("steps: 1,") && stderr.contains("wrong_seq: 1,") && stderr.contains("rejected: 1 "), "{stderr}");
+}
