@@ -130,6 +130,13 @@ fn peer(args: &Args, net: &str, cfg: &str, mode: &str) -> Option<f64> {
 
 fn main() {
     let args = parse();
+    // EQUIARM_CONV=unfold: convolutions as unfold + matmul (see equiarm_nn::layers::ConvAlgo).
+    if std::env::var("EQUIARM_CONV").as_deref() == Ok("unfold") {
+        equiarm_nn::layers::set_conv_algo(equiarm_nn::layers::ConvAlgo::Unfold);
+        println!("convolution: unfold + matmul");
+    } else {
+        println!("convolution: burn conv2d");
+    }
     println!("{:<6} {:<8} {:<11} {:>12} {:>12} {:>8}", "net", "config", "mode", "burn-flex s", "torch s", "ratio");
     for &cfg_name in &args.configs {
         let cfg = config(cfg_name);

@@ -45,6 +45,43 @@ pub enum LayerError {
     },
 }
 
+/// How convolutions are computed (both give the same result up to float rounding).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ConvAlgo {
+    /// burn's `conv2d` (im2col + gemm forward; its backward is a transposed conv and a conv
+    /// with an H×W kernel for the weight gradient).
+    Burn,
+    /// [`conv2d_unfold`]: 9 shifted slices + one batched matmul; autodiff through matmuls.
+    /// NOTE: measured about 2× slower than `Burn` for a training step on flex (the slices, the
+    /// stack and their backward are memory-bound), also in a channel-major variant with one
+    /// large gemm; kept as a cross-check and for backends with faster slicing.
+    Unfold,
+}
+
+static CONV_ALGO: std::sync::atomic::AtomicU8 = std::sync::atomic::AtomicU8::new(0);
+
+/// Choose the convolution algorithm for all layers of this process (default [`ConvAlgo::Burn`]).
+/// A process-wide switch so that benchmarks can compare both on the same networks.
+pub fn set_conv_algo(algo: ConvAlgo) {
+    CONV_ALGO.store(algo as u8, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// The current convolution algorithm.
+pub fn conv_algo() -> ConvAlgo {
+    match CONV_ALGO.load(std::sync::atomic::Ordering::Relaxed) {
+        1 => ConvAlgo::Unfold,
+        _ => ConvAlgo::Burn,
+    }
+}
+
+/// Stride-1 convolution with the algorithm chosen by [`set_conv_algo`].
+pub fn conv2d_stride1(x: Tensor<4>, kernel: Tensor<4>, bias: Option<Tensor<1>>, padding: usize) -> Tensor<4> {
+    match conv_algo() {
+        ConvAlgo::Burn => conv2d(x, kernel, bias, ConvOptions::new([1, 1], [padding, padding], [1, 1], 1)),
+        ConvAlgo::Unfold => conv2d_unfold(x, kernel, bias, padding),
+    }
+}
+
 /// Structure of one (output run, input run) block of an equivariant conv.
 #[derive(Clone, Debug)]
 struct Block {
@@ -228,8 +265,7 @@ impl EquivariantConv {
             _ => self.kernel(),
         };
         let bias = self.dense_bias(&x.device());
-        let p = self.padding;
-        conv2d(x, kernel, Some(bias), ConvOptions::new([1, 1], [p, p], [1, 1], 1))
+        conv2d_stride1(x, kernel, Some(bias), self.padding)
     }
 
     /// Number of input channels.
@@ -327,3 +363,4 @@ pub fn conv2d_unfold(x: Tensor<4>, kernel: Tensor<4>, bias: Option<Tensor<1>>, p
         None => y,
     }
 }
+

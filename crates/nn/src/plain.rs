@@ -4,8 +4,6 @@
 
 use crate::init::Init;
 use burn::module::{Module, Param};
-use burn::tensor::module::conv2d;
-use burn::tensor::ops::ConvOptions;
 use burn::tensor::{Device, Tensor, TensorData};
 
 /// Plain 2-D convolution, stride 1, square kernel, zero padding.
@@ -32,8 +30,7 @@ impl Conv {
 
     /// `[B, in, H, W] → [B, out, H + 2p − k + 1, W + 2p − k + 1]`.
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let p = self.padding;
-        conv2d(x, self.weight.val(), Some(self.bias.val()), ConvOptions::new([1, 1], [p, p], [1, 1], 1))
+        crate::layers::conv2d_stride1(x, self.weight.val(), Some(self.bias.val()), self.padding)
     }
 }
 

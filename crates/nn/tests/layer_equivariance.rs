@@ -126,3 +126,26 @@ fn cached_kernel_gives_the_same_output() {
     let cached = conv.cache_kernel();
     assert_eq!(common::values(cached.forward(x)), common::values(y));
 }
+
+/// The unfold + matmul convolution equals burn's conv2d (forward and gradients), with and
+/// without padding, for 3×3 and 1×1 kernels.
+#[test]
+fn unfold_convolution_matches_burn_conv2d() {
+    use equiarm_nn::burn::tensor::module::conv2d;
+    use equiarm_nn::burn::tensor::ops::ConvOptions;
+    use equiarm_nn::layers::conv2d_unfold;
+    let dev = device().autodiff();
+    for (k, p) in [(3, 1), (3, 0), (1, 0)] {
+        let x = randn::<4>(21, "x", [2, 3, 6, 6], &dev).require_grad();
+        let w = randn::<4>(21, "w", [4, 3, k, k], &dev).require_grad();
+        let b = randn::<1>(21, "b", [4], &dev).require_grad();
+        let y1 = conv2d(x.clone(), w.clone(), Some(b.clone()), ConvOptions::new([1, 1], [p, p], [1, 1], 1));
+        let y2 = conv2d_unfold(x.clone(), w.clone(), Some(b.clone()), p);
+        assert!(rel_err(y2.clone(), y1.clone()) < 1e-5, "forward k={k} p={p}");
+        let g1 = y1.powf_scalar(2.0).sum().backward();
+        let g2 = y2.powf_scalar(2.0).sum().backward();
+        assert!(rel_err(w.grad(&g2).unwrap(), w.grad(&g1).unwrap()) < 1e-5, "weight grad k={k} p={p}");
+        assert!(rel_err(x.grad(&g2).unwrap(), x.grad(&g1).unwrap()) < 1e-5, "input grad k={k} p={p}");
+        assert!(rel_err(b.grad(&g2).unwrap(), b.grad(&g1).unwrap()) < 1e-5, "bias grad k={k} p={p}");
+    }
+}
