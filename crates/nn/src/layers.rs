@@ -258,10 +258,16 @@ impl EquivariantConv {
         self
     }
 
+    /// Whether [`EquivariantConv::forward`] currently uses the cached dense kernel (a cache is
+    /// present and the weights are not tracked by autodiff).
+    pub fn uses_cached_kernel(&self) -> bool {
+        self.cached.is_some() && !self.weight.first().is_some_and(|w| w.val().is_require_grad())
+    }
+
     /// Forward pass: `[B, in_channels, H, W] → [B, out_channels, H + 2p − k + 1, W + 2p − k + 1]`.
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let kernel = match &self.cached {
-            Some(k) if !self.weight.first().is_some_and(|w| w.val().is_require_grad()) => k.clone(),
+            Some(k) if self.uses_cached_kernel() => k.clone(),
             _ => self.kernel(),
         };
         let bias = self.dense_bias(&x.device());

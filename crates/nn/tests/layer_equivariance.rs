@@ -123,8 +123,13 @@ fn cached_kernel_gives_the_same_output() {
     let conv = EquivariantConv::new("c", &tin, &tout, 3, 1, &Init::new(3), &dev).unwrap();
     let x = randn::<4>(3, "x", [1, tin.size(), 6, 6], &dev);
     let y = conv.forward(x.clone());
+    assert!(!conv.uses_cached_kernel());
     let cached = conv.cache_kernel();
+    assert!(cached.uses_cached_kernel());
     assert_eq!(common::values(cached.forward(x)), common::values(y));
+    // a module tracked by autodiff never uses a (possibly stale) cache
+    let tracked = EquivariantConv::new("c", &tin, &tout, 3, 1, &Init::new(3), &dev.clone().autodiff()).unwrap().cache_kernel();
+    assert!(!tracked.uses_cached_kernel());
 }
 
 /// The unfold + matmul convolution equals burn's conv2d (forward and gradients), with and
