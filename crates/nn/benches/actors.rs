@@ -3,7 +3,10 @@
 //!
 //! Cases: forward at batch 1 (policy node; Equi uses cached kernels), forward at batch 128,
 //! forward + backward + Adam at batch 128; paper config (hidden 64, 128 px) and reduced CPU
-//! config (hidden 16, 64 px). Medians of `--reps` runs after one warm-up.
+//! config (hidden 16, 64 px). Medians of `--reps` runs (5× as many at batch 1) after one
+//! warm-up. The bench profile builds burn in release (a cold build takes ~20 min); the dev
+//! profile also optimises dependencies, so `cargo build -p equiarm_nn --benches` and running
+//! the binary from `target/debug/deps/actors-*` gives close figures much sooner.
 //!
 //! `cargo bench -p equiarm_nn --bench actors -- [--reps N] [--config paper|reduced|all]
 //!   [--net equi|cnn|all] [--mode fwd_b1|fwd_b128|train_b128|all] [--no-peer] [--python PY]`
@@ -109,13 +112,13 @@ fn run_train<A: Actor + Module>(actor: A, cfg: &NetConfig, reps: usize) -> f64 {
     })
 }
 
-fn peer(args: &Args, net: &str, cfg: &str, mode: &str) -> Option<f64> {
+fn peer(args: &Args, net: &str, cfg: &str, mode: &str, reps: usize) -> Option<f64> {
     if !args.peer {
         return None;
     }
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/../../bench/e2cnn_peer.py");
     let out = Command::new(&args.python)
-        .args([script, "--net", net, "--config", cfg, "--mode", mode, "--threads", &args.threads.to_string(), "--reps", &args.reps.to_string()])
+        .args([script, "--net", net, "--config", cfg, "--mode", mode, "--threads", &args.threads.to_string(), "--reps", &reps.to_string()])
         .output()
         .ok()?;
     if !out.status.success() {
@@ -142,7 +145,8 @@ fn main() {
         let cfg = config(cfg_name);
         for &net in &args.nets {
             for &mode in &args.modes {
-                let reps = args.reps;
+                // batch 1 is cheap and noisy: take more runs
+                let reps = if mode == "fwd_b1" { (args.reps * 5).max(10) } else { args.reps };
                 let ours = match (net, mode) {
                     ("equi", "train_b128") => run_train(EquiActor::new(&cfg, &Init::new(0), &Device::flex().autodiff()).unwrap(), &cfg, reps),
                     ("cnn", "train_b128") => run_train(CnnActor::new(&cfg, &Init::new(0), &Device::flex().autodiff()).unwrap(), &cfg, reps),
@@ -155,7 +159,7 @@ fn main() {
                         bench_forward(&a, &cfg, if m == "fwd_b1" { 1 } else { 128 }, reps)
                     }
                 };
-                let theirs = peer(&args, net, cfg_name, mode);
+                let theirs = peer(&args, net, cfg_name, mode, reps);
                 let ratio = theirs.map(|t| format!("{:.2}", ours / t)).unwrap_or_else(|| "-".into());
                 let t = theirs.map(|t| format!("{t:.4}")).unwrap_or_else(|| "-".into());
                 println!("{net:<6} {cfg_name:<8} {mode:<11} {ours:>12.4} {t:>12} {ratio:>8}");

@@ -1,8 +1,9 @@
 //! Measure the equivariance error of a saved network per group element (until the `equiarm`
 //! binary wires `equiarm nn check-equivariance CKPT`).
 //!
-//! `cargo run -p equiarm_nn --example check_equivariance -- CKPT [equi-actor|equi-critic|rot-equi]
+//! `cargo run -p equiarm_nn --example check_equivariance -- CKPT|--fresh [equi-actor|equi-critic|rot-equi]
 //!  [--hidden 64] [--size 128] [--channels 5] [--batch 2] [--seed 0]`
+//! (`--fresh`: no file, the seeded initial weights.)
 
 use equiarm_nn::burn::tensor::Device;
 use equiarm_nn::diagnostics::{check_checkpoint, NetKind};
@@ -10,7 +11,7 @@ use equiarm_nn::nets::NetConfig;
 
 fn main() {
     let argv: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: check_equivariance CKPT [equi-actor|equi-critic|rot-equi] [--hidden N] [--size N] [--channels N] [--batch N] [--seed N]";
+    let usage = "usage: check_equivariance CKPT|--fresh [equi-actor|equi-critic|rot-equi] [--hidden N] [--size N] [--channels N] [--batch N] [--seed N]";
     let Some(path) = argv.first() else {
         eprintln!("{usage}");
         std::process::exit(2);
@@ -37,7 +38,8 @@ fn main() {
         }
         i += 1;
     }
-    match check_checkpoint(kind, &cfg, std::path::Path::new(path), batch, seed, &Device::flex()) {
+    let file = (path != "--fresh").then(|| std::path::Path::new(path));
+    match check_checkpoint(kind, &cfg, file, batch, seed, &Device::flex()) {
         Ok(errs) => {
             println!("element (flip, rot)   relative error");
             for e in errs {

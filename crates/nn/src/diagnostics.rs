@@ -157,19 +157,25 @@ pub enum CheckError {
     Checkpoint(#[from] crate::checkpoint::CheckpointError),
 }
 
-/// Load the weights in `path` into a network of `kind` and `cfg`, and measure its equivariance
+/// Load the weights in `path` (or keep the fresh seeded initialisation when `path` is `None`)
+/// into a network of `kind` and `cfg`, and measure its equivariance
 /// error per grid element on `batch` random N(0,1) inputs drawn with `seed` (and random tanh
 /// actions for the critic). The body of `equiarm nn check-equivariance CKPT`.
 pub fn check_checkpoint(
     kind: NetKind,
     cfg: &crate::nets::NetConfig,
-    path: &std::path::Path,
+    path: Option<&std::path::Path>,
     batch: usize,
     seed: u64,
     device: &burn::tensor::Device,
 ) -> Result<Vec<ElementError>, CheckError> {
-    use crate::checkpoint::load;
     use crate::init::Init;
+    fn load<M: burn::module::Module>(m: M, path: Option<&std::path::Path>) -> Result<M, crate::checkpoint::CheckpointError> {
+        match path {
+            Some(p) => crate::checkpoint::load(m, p),
+            None => Ok(m),
+        }
+    }
     use burn::tensor::TensorData;
     let init = Init::new(seed);
     let s = cfg.input_size;
