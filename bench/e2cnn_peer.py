@@ -1,0 +1,151 @@
+#!/usr/bin/env python3
+"""Peer benchmark for crates/nn: the Equi SAC actor (PyTorch + e2cnn, the authors' stack) and the
+CNN SAC actor (plain PyTorch), same shapes as equiarm_nn's nets (PAPER_SPEC §1.4, §1.8).
+
+Run with any python3: on first use it creates bench/.venv, installs torch (CPU wheel) and e2cnn
+from PyPI into it, and re-executes itself there. Prints one JSON object per line:
+{"net", "config", "mode", "median_s", "runs"}. Called by `cargo bench -p equiarm_nn --bench actors`,
+which interleaves these figures with its own and prints ratios.
+
+Usage: e2cnn_peer.py --net equi|cnn --config paper|reduced --mode fwd_b1|fwd_b128|train_b128
+                     [--threads 2] [--reps 3]
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+VENV = os.path.join(HERE, ".venv")
+VPY = os.path.join(VENV, "bin", "python")
+
+
+def ensure_venv():
+    patch_e2cnn()  # before the first import of e2cnn
+    try:
+        import torch  # noqa: F401
+        import e2cnn  # noqa: F401
+        return
+    except ImportError:
+        pass
+    if os.path.abspath(sys.executable) == os.path.abspath(VPY):
+        sys.exit("bench/.venv exists but lacks torch or e2cnn; delete bench/.venv and retry")
+    if not os.path.exists(VPY):
+        subprocess.check_call([sys.executable, "-m", "venv", VENV])
+        pip = [VPY, "-m", "pip", "install", "--quiet"]
+        # CPU-only wheel first (small); fall back to the default index.
+        if subprocess.call(pip + ["torch", "--index-url", "https://download.pytorch.org/whl/cpu"]) != 0:
+            subprocess.check_call(pip + ["torch"])
+        # e2cnn 0.2.3 calls ndarray.tostring(), removed in numpy 2.
+        subprocess.check_call(pip + ["e2cnn", "scipy", "numpy<2"])
+    os.execv(VPY, [VPY] + sys.argv)
+
+
+def patch_e2cnn():
+    """e2cnn 0.2.3 indexes with uint8 masks, which torch >= 2 rejects ("masked_fill_ only
+    supports boolean masks"). Patch the venv's copy to use bool masks (same semantics)."""
+    import importlib.util
+    spec = importlib.util.find_spec("e2cnn")
+    if spec is None:
+        return
+    f = os.path.join(os.path.dirname(spec.origin), "nn", "modules", "r2_conv", "basisexpansion_singleblock.py")
+    src = open(f).read()
+    fixed = src.replace("mask = mask.astype(np.uint8)", "mask = mask.astype(bool)").replace(
+        "full_mask[mask] = norms.to(torch.uint8)", "full_mask[mask] = norms")
+    if fixed != src:
+        open(f, "w").write(fixed)
+
+
+CONFIGS = {"paper": (64, 128), "reduced": (16, 64)}  # (hidden, input size), as NetConfig
+
+
+def pools_for(size):
+    p = {8: 0, 16: 1, 32: 2, 64: 3, 128: 4}[size]
+    return [p > 0, p > 1, p > 2, p > 3, False, True, False]
+
+
+def equi_actor(hidden, size, in_ch=5):
+    from e2cnn import gspaces, nn as enn
+    g = gspaces.FlipRot2dOnR2(N=4)
+    n = hidden
+    t_in = enn.FieldType(g, in_ch * [g.trivial_repr])
+    input_type = t_in
+    layers = []
+    for f, pad, pool in zip([n // 8, n // 4, n // 2, n, 2 * n, n, n], [1, 1, 1, 1, 1, 0, 0], pools_for(size)):
+        t_out = enn.FieldType(g, f * [g.regular_repr])
+        layers += [enn.R2Conv(t_in, t_out, kernel_size=3, padding=pad), enn.ReLU(t_out, inplace=True)]
+        if pool:
+            layers.append(enn.PointwiseMaxPool(t_out, 2))
+        t_in = t_out
+    out = enn.FieldType(g, [g.irrep(1, 1), g.quotient_repr((None, 4))] + 7 * [g.trivial_repr])
+    layers.append(enn.R2Conv(t_in, out, kernel_size=1, padding=0))
+    net = enn.SequentialModule(*layers)
+
+    def fwd(x):
+        return net(enn.GeometricTensor(x, input_type)).tensor.reshape(x.shape[0], -1)
+
+    return net, fwd
+
+
+def cnn_actor(hidden, size, in_ch=5):
+    import torch.nn as nn
+    n = hidden
+    widths = [n // 4, n // 2, n, 2 * n, 2 * n, 4 * n, 4 * n]
+    layers, c = [], in_ch
+    for w, pad, pool in zip(widths, [1, 1, 1, 1, 1, 0, 0], pools_for(size)):
+        layers += [nn.Conv2d(c, w, 3, padding=pad), nn.ReLU(inplace=True)]
+        if pool:
+            layers.append(nn.MaxPool2d(2))
+        c = w
+    layers.append(nn.Conv2d(c, 10, 1))
+    net = nn.Sequential(*layers)
+    return net, lambda x: net(x).reshape(x.shape[0], -1)
+
+
+def main():
+    ensure_venv()
+    import torch
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--net", choices=["equi", "cnn"], required=True)
+    ap.add_argument("--config", choices=list(CONFIGS), required=True)
+    ap.add_argument("--mode", choices=["fwd_b1", "fwd_b128", "train_b128"], required=True)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--reps", type=int, default=3)
+    a = ap.parse_args()
+    torch.set_num_threads(a.threads)
+    torch.manual_seed(0)
+    hidden, size = CONFIGS[a.config]
+    net, fwd = (equi_actor if a.net == "equi" else cnn_actor)(hidden, size)
+    batch = 1 if a.mode == "fwd_b1" else 128
+    x = torch.randn(batch, 5, size, size)
+    if a.mode == "train_b128":
+        net.train()
+        opt = torch.optim.Adam(net.parameters(), lr=1e-4)
+        target = torch.randn(batch, 10 if a.net == "cnn" else 11)
+
+        def step():
+            opt.zero_grad()
+            loss = ((fwd(x) - target) ** 2).mean()
+            loss.backward()
+            opt.step()
+    else:
+        net.eval()  # e2cnn caches the expanded filters in eval mode
+
+        def step():
+            with torch.no_grad():
+                fwd(x)
+    step()  # warm-up
+    times = []
+    for _ in range(a.reps):
+        t0 = time.perf_counter()
+        step()
+        times.append(time.perf_counter() - t0)
+    times.sort()
+    print(json.dumps({"net": a.net, "config": a.config, "mode": a.mode,
+                      "median_s": times[len(times) // 2], "runs": len(times)}), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,112 @@
+//! Save and load network weights as safetensors files with readable parameter names (the module
+//! path, e.g. `enc.convs.0.weight.0`, `q1.conv1.bias.0`).
+//!
+//! Loading checks the file against the module first and refuses a file made for another
+//! architecture, naming the first mismatching tensor (missing, wrong shape or unexpected), so a
+//! mismatch never loads half a network.
+//!
+//! Limitations: weights only. Optimiser state, replay buffer and RNG state belong to the trainer's
+//! checkpoint; constant tensors (kernel bases) are rebuilt at construction and not stored.
+
+use burn::module::Module;
+use burn::store::{ModuleSnapshot, ModuleStore, SafetensorsStore};
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// Errors saving or loading weights.
+#[derive(Debug, Error)]
+pub enum CheckpointError {
+    /// The underlying store failed (I/O, format).
+    #[error("{path}: {message}")]
+    Store {
+        /// File.
+        path: PathBuf,
+        /// What the store said.
+        message: String,
+    },
+    /// A tensor the network needs is not in the file.
+    #[error("{path}: tensor `{name}` (shape {expected:?}) is missing from the file: it was saved from another architecture")]
+    Missing {
+        /// File.
+        path: PathBuf,
+        /// Parameter name.
+        name: String,
+        /// Shape the network needs.
+        expected: Vec<usize>,
+    },
+    /// A tensor has a different shape in the file.
+    #[error("{path}: tensor `{name}` has shape {found:?} in the file but the network needs {expected:?}: it was saved from another architecture or size")]
+    Shape {
+        /// File.
+        path: PathBuf,
+        /// Parameter name.
+        name: String,
+        /// Shape the network needs.
+        expected: Vec<usize>,
+        /// Shape in the file.
+        found: Vec<usize>,
+    },
+    /// The file has a tensor the network does not.
+    #[error("{path}: the file has tensor `{name}`, which this network does not have: it was saved from another architecture")]
+    Unexpected {
+        /// File.
+        path: PathBuf,
+        /// Parameter name.
+        name: String,
+    },
+}
+
+/// Names and shapes of a module's parameters, in module order.
+pub fn parameter_shapes<M: Module>(module: &M) -> Vec<(String, Vec<usize>)> {
+    module
+        .collect(None, None, false)
+        .into_iter()
+        .map(|t| (t.name.clone(), t.shape.to_vec()))
+        .collect()
+}
+
+/// Save `module`'s parameters to `path` (overwriting an existing file).
+pub fn save<M: Module>(module: &M, path: &Path) -> Result<(), CheckpointError> {
+    let mut store = SafetensorsStore::from_file(path).overwrite(true);
+    module
+        .save_into(&mut store)
+        .map_err(|e| CheckpointError::Store { path: path.into(), message: e.to_string() })
+}
+
+/// Load parameters from `path` into `module`, after checking that every tensor name and shape
+/// matches (the first mismatch is reported).
+pub fn load<M: Module>(mut module: M, path: &Path) -> Result<M, CheckpointError> {
+    let store_err = |e: &dyn std::fmt::Display| CheckpointError::Store { path: path.into(), message: e.to_string() };
+    let mut store = SafetensorsStore::from_file(path);
+    let in_file: Vec<(String, Vec<usize>)> = store
+        .get_all_tensors()
+        .map_err(|e| store_err(&e))?
+        .values()
+        .map(|t| (t.name.clone(), t.shape.to_vec()))
+        .collect();
+    let expected = parameter_shapes(&module);
+    for (name, shape) in &expected {
+        match in_file.iter().find(|(n, _)| n == name) {
+            None => {
+                return Err(CheckpointError::Missing { path: path.into(), name: name.clone(), expected: shape.clone() });
+            }
+            Some((_, found)) if found != shape => {
+                return Err(CheckpointError::Shape {
+                    path: path.into(),
+                    name: name.clone(),
+                    expected: shape.clone(),
+                    found: found.clone(),
+                });
+            }
+            Some(_) => {}
+        }
+    }
+    if let Some((name, _)) = in_file.iter().find(|(n, _)| !expected.iter().any(|(e, _)| e == n)) {
+        return Err(CheckpointError::Unexpected { path: path.into(), name: name.clone() });
+    }
+    let result = module.load_from(&mut store).map_err(|e| store_err(&e))?;
+    if !result.errors.is_empty() || !result.missing.is_empty() {
+        return Err(CheckpointError::Store { path: path.into(), message: format!("{result}") });
+    }
+    Ok(module)
+}

@@ -1,0 +1,594 @@
+//! The paper's networks (PAPER_SPEC §1.4–1.9, §4), parameterised by hidden size and input size so
+//! that one code base serves the paper config (GPU) and a reduced CPU config.
+//!
+//! - [`EquiActor`], [`EquiCritic`]: Equivariant SAC, group D4 (§1.4, §1.5).
+//! - [`CnnActor`], [`CnnCritic`]: the CNN SAC baseline, 'conv' variant (§1.8).
+//! - [`SenActor`], [`SenCritic`]: SEN fc2, a CNN encoder with equivariant heads (§1.9).
+//! - [`RotEquiNet`], [`RotCnnNet`]: the C8 rotation-estimation classifiers (§4).
+//!
+//! Input size: `8·2^p` pixels with `0 ≤ p ≤ 4` (128 in the paper); the first `p` of encoder layers
+//! 1–4 end with a 2×2 max-pool so that the map is 8×8 before the unpadded tail (8 → 6 → 3 → 1).
+//! At 128 px the layer structure is exactly the paper's. Actions are `(p, dx, dy, dz, dθ)`
+//! (PAPER_SPEC §1.2).
+//!
+//! Limitations: the SAC sampling helper is in [`gaussian_sample`]; losses and the update live in
+//! the trainer, not here.
+
+use crate::group::Group;
+use crate::init::Init;
+use crate::layers::{concat, group_pool, max_pool2, relu, EquivariantConv, LayerError};
+use crate::plain::{Conv, Linear};
+use crate::repr::{FieldType, Representation};
+use burn::module::Module;
+use burn::tensor::{Device, Tensor};
+use thiserror::Error;
+
+/// Errors building a network.
+#[derive(Debug, Error)]
+pub enum NetError {
+    /// The configuration cannot be built.
+    #[error("invalid network config: {0}")]
+    Config(String),
+    /// A layer failed to build.
+    #[error(transparent)]
+    Layer(#[from] LayerError),
+}
+
+/// Log-std clamp range (SAC, PAPER_SPEC §1.4).
+pub const LOG_STD_MIN: f32 = -20.0;
+/// Upper log-std clamp.
+pub const LOG_STD_MAX: f32 = 2.0;
+
+/// Network size configuration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NetConfig {
+    /// Hidden size `n`: regular fields of the equivariant encoder output (paper 64; SEN paper 32).
+    /// For CNNs the channel widths scale with it (paper 64 ⇒ 16…256). A multiple of 8.
+    pub hidden: usize,
+    /// Input height = width in pixels, `8·2^p`, `p ≤ 4` (paper 128).
+    pub input_size: usize,
+    /// Input channels (paper: 5 = RGBD + holding plane for SAC, 8 for rotation estimation).
+    pub in_channels: usize,
+}
+
+impl NetConfig {
+    /// Paper settings for the SAC nets: hidden 64, 128 px, 5 channels.
+    pub const fn paper() -> Self {
+        NetConfig { hidden: 64, input_size: 128, in_channels: 5 }
+    }
+
+    /// Paper settings for SEN fc2: hidden 32, 128 px, 5 channels.
+    pub const fn paper_sen() -> Self {
+        NetConfig { hidden: 32, input_size: 128, in_channels: 5 }
+    }
+
+    /// Paper settings for the rotation-estimation nets: hidden 64, 128 px, 8 channels.
+    pub const fn paper_rotation() -> Self {
+        NetConfig { hidden: 64, input_size: 128, in_channels: 8 }
+    }
+
+    /// Reduced CPU config: hidden 16, 64 px, 5 channels (same layer structure, one pool fewer).
+    pub const fn reduced_cpu() -> Self {
+        NetConfig { hidden: 16, input_size: 64, in_channels: 5 }
+    }
+
+    /// Number of 2×2 pools in layers 1–4.
+    fn pools(&self) -> Result<usize, NetError> {
+        if self.hidden == 0 || self.hidden % 8 != 0 {
+            return Err(NetError::Config(format!("hidden size {} must be a positive multiple of 8", self.hidden)));
+        }
+        if self.in_channels == 0 {
+            return Err(NetError::Config("in_channels must be positive".into()));
+        }
+        (0..=4)
+            .find(|&p| 8 << p == self.input_size)
+            .ok_or_else(|| NetError::Config(format!("input size {} must be 8, 16, 32, 64 or 128", self.input_size)))
+    }
+}
+
+/// The 7-layer equivariant encoder `EquivariantEncoder128` (PAPER_SPEC §1.4 layers 1–7).
+///
+/// Input field type: `in_channels × trivial`; output: `hidden × regular` at 1×1.
+#[derive(Module, Debug)]
+pub struct EquiEncoder {
+    /// Layers 1–7.
+    pub convs: Vec<EquivariantConv>,
+    pools: Vec<bool>,
+    out_fields: usize,
+}
+
+impl EquiEncoder {
+    /// Build for `group` (D4 for SAC, C8 for rotation estimation).
+    pub fn new(path: &str, group: Group, cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
+        let p = cfg.pools()?;
+        let n = cfg.hidden;
+        let fields = [n / 8, n / 4, n / 2, n, 2 * n, n, n];
+        let pads = [1, 1, 1, 1, 1, 0, 0];
+        let pools = vec![p > 0, p > 1, p > 2, p > 3, false, true, false];
+        let mut in_type = FieldType::trivial(group, cfg.in_channels);
+        let mut convs = Vec::new();
+        for (i, (&f, &pad)) in fields.iter().zip(&pads).enumerate() {
+            let out_type = FieldType::regular(group, f);
+            convs.push(EquivariantConv::new(&format!("{path}.convs.{i}"), &in_type, &out_type, 3, pad, init, device)?);
+            in_type = out_type;
+        }
+        Ok(EquiEncoder { convs, pools, out_fields: n })
+    }
+
+    /// `[B, in_channels, S, S] → [B, 8·hidden (|G|·hidden), 1, 1]`.
+    pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        let mut x = x;
+        for (conv, &pool) in self.convs.iter().zip(&self.pools) {
+            x = relu(conv.forward(x));
+            if pool {
+                x = max_pool2(x);
+            }
+        }
+        x
+    }
+
+    /// Number of regular output fields.
+    pub fn out_fields(&self) -> usize {
+        self.out_fields
+    }
+
+    /// Expand and cache every dense kernel (inference only).
+    pub fn cache_kernels(self) -> Self {
+        let EquiEncoder { convs, pools, out_fields } = self;
+        EquiEncoder { convs: convs.into_iter().map(|c| c.cache_kernel()).collect(), pools, out_fields }
+    }
+}
+
+/// The field type of the Equi SAC actor's output (11 channels): `irrep(1,1)` (dx, dy) ⊕
+/// `quotient(C4)` (θ, −θ parts) ⊕ 7 × trivial (p, dz, 5 log-stds). PAPER_SPEC §1.4.
+pub fn actor_out_type(group: Group) -> FieldType {
+    FieldType::new(
+        group,
+        vec![Representation::irrep(group, 1, 1), Representation::quotient_by_rotations(group)],
+    )
+    .concat(&FieldType::trivial(group, 7))
+}
+
+/// The field type of the lifted action (6 channels): 2 × trivial (p, dz) ⊕ `irrep(1,1)` (dx, dy)
+/// ⊕ `quotient(C4)` (dθ, −dθ). PAPER_SPEC §1.5.
+pub fn action_type(group: Group) -> FieldType {
+    FieldType::trivial(group, 2).concat(&FieldType::new(
+        group,
+        vec![Representation::irrep(group, 1, 1), Representation::quotient_by_rotations(group)],
+    ))
+}
+
+/// Lift actions `[B, 5]` in order `(p, dx, dy, dz, dθ)` into the field type [`action_type`]:
+/// `[B, 6, 1, 1] = (p, dz, dx, dy, dθ, −dθ)`.
+pub fn lift_action(a: Tensor<2>) -> Tensor<4> {
+    let [b, _] = a.dims();
+    let col = |i: usize| a.clone().narrow(1, i, 1);
+    let theta = col(4);
+    Tensor::cat(vec![col(0), col(3), col(1), col(2), theta.clone(), theta.neg()], 1).reshape([b, 6, 1, 1])
+}
+
+/// Decode an actor head's 11 channels `[B, 11]` into `(mean, log_std)`, both `[B, 5]` in action
+/// order (PAPER_SPEC §1.4 `getOutput`).
+fn decode_equi(raw: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
+    let col = |i: usize| raw.clone().narrow(1, i, 1);
+    let dtheta = col(2) - col(3);
+    let mean = Tensor::cat(vec![col(4), col(0), col(1), col(5), dtheta], 1);
+    let log_std = raw.clone().narrow(1, 6, 5).clamp(LOG_STD_MIN, LOG_STD_MAX);
+    (mean, log_std)
+}
+
+/// A SAC Gaussian policy network: observation → (mean, log_std), each `[B, 5]`.
+pub trait Actor {
+    /// `[B, C, S, S] → (mean [B, 5], log_std [B, 5])` (log_std clamped to [−20, 2]).
+    fn forward(&self, obs: Tensor<4>) -> (Tensor<2>, Tensor<2>);
+}
+
+/// A SAC twin critic: (observation, action) → (Q1, Q2), each `[B, 1]`.
+pub trait Critic {
+    /// `([B, C, S, S], [B, 5]) → (Q1 [B, 1], Q2 [B, 1])`.
+    fn forward(&self, obs: Tensor<4>, action: Tensor<2>) -> (Tensor<2>, Tensor<2>);
+}
+
+/// Equivariant SAC actor `EquivariantSACActorDihedral` (D4). Input: `in_channels × trivial`;
+/// head output: [`actor_out_type`].
+#[derive(Module, Debug)]
+pub struct EquiActor {
+    /// Encoder, layers 1–7.
+    pub enc: EquiEncoder,
+    /// 1×1 head, `hidden × regular → actor_out_type`.
+    pub head: EquivariantConv,
+}
+
+impl EquiActor {
+    /// Build with weights from `init`.
+    pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
+        let g = Group::dihedral(4);
+        let enc = EquiEncoder::new("enc", g, cfg, init, device)?;
+        let head = EquivariantConv::new("head", &FieldType::regular(g, cfg.hidden), &actor_out_type(g), 1, 0, init, device)?;
+        Ok(EquiActor { enc, head })
+    }
+
+    /// The head's 11 geometric output channels `[B, 11]` (type [`actor_out_type`]).
+    pub fn forward_raw(&self, obs: Tensor<4>) -> Tensor<2> {
+        let y = self.head.forward(self.enc.forward(obs));
+        let [b, c, _, _] = y.dims();
+        y.reshape([b, c])
+    }
+
+    /// Expand and cache every dense kernel for fast inference (do not train the result).
+    pub fn cache_kernels(self) -> Self {
+        EquiActor { enc: self.enc.cache_kernels(), head: self.head.cache_kernel() }
+    }
+}
+
+impl Actor for EquiActor {
+    fn forward(&self, obs: Tensor<4>) -> (Tensor<2>, Tensor<2>) {
+        decode_equi(self.forward_raw(obs))
+    }
+}
+
+/// One equivariant Q head: `1×1 (mixed type → hidden × regular) → ReLU → group pooling →
+/// 1×1 (hidden × trivial → 1 trivial)`. Output invariant.
+#[derive(Module, Debug)]
+pub struct EquiQHead {
+    /// Mixed type → regular.
+    pub conv1: EquivariantConv,
+    /// Trivial → 1 trivial.
+    pub conv2: EquivariantConv,
+    fields: usize,
+    dim: usize,
+}
+
+impl EquiQHead {
+    fn new(path: &str, in_type: &FieldType, hidden: usize, init: &Init, device: &Device) -> Result<Self, NetError> {
+        let g = in_type.group();
+        let conv1 = EquivariantConv::new(&format!("{path}.conv1"), in_type, &FieldType::regular(g, hidden), 1, 0, init, device)?;
+        let conv2 = EquivariantConv::new(&format!("{path}.conv2"), &FieldType::trivial(g, hidden), &FieldType::trivial(g, 1), 1, 0, init, device)?;
+        Ok(EquiQHead { conv1, conv2, fields: hidden, dim: g.order() })
+    }
+
+    fn forward(&self, x: Tensor<4>) -> Tensor<2> {
+        let h = group_pool(relu(self.conv1.forward(x)), self.fields, self.dim);
+        let q = self.conv2.forward(h);
+        let [b, _, _, _] = q.dims();
+        q.reshape([b, 1])
+    }
+}
+
+/// Equivariant SAC twin critic `EquivariantSACCriticDihedral` (D4). Input: observation
+/// (`in_channels × trivial`) and the action lifted by [`lift_action`]; each head's input type is
+/// `hidden × regular ⊕ action_type`; outputs Q1, Q2 invariant.
+#[derive(Module, Debug)]
+pub struct EquiCritic {
+    /// Encoder (not shared with the actor).
+    pub enc: EquiEncoder,
+    /// Q1 head.
+    pub q1: EquiQHead,
+    /// Q2 head.
+    pub q2: EquiQHead,
+}
+
+impl EquiCritic {
+    /// Build with weights from `init`.
+    pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
+        let g = Group::dihedral(4);
+        let enc = EquiEncoder::new("enc", g, cfg, init, device)?;
+        let t = FieldType::regular(g, cfg.hidden).concat(&action_type(g));
+        Ok(EquiCritic {
+            enc,
+            q1: EquiQHead::new("q1", &t, cfg.hidden, init, device)?,
+            q2: EquiQHead::new("q2", &t, cfg.hidden, init, device)?,
+        })
+    }
+}
+
+impl Critic for EquiCritic {
+    fn forward(&self, obs: Tensor<4>, action: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
+        let x = concat(vec![self.enc.forward(obs), lift_action(action)]);
+        (self.q1.forward(x.clone()), self.q2.forward(x))
+    }
+}
+
+/// The plain CNN encoder `SACEncoderFullyConv` (PAPER_SPEC §1.8): widths `n/4, n/2, n, 2n, 2n,
+/// 4n, 4n` (paper n = 64: 16 … 256).
+#[derive(Module, Debug)]
+pub struct CnnEncoder {
+    /// Layers 1–7.
+    pub convs: Vec<Conv>,
+    pools: Vec<bool>,
+}
+
+impl CnnEncoder {
+    fn new(path: &str, cfg: &NetConfig, widths: [usize; 7], init: &Init, device: &Device) -> Result<Self, NetError> {
+        let p = cfg.pools()?;
+        let pads = [1, 1, 1, 1, 1, 0, 0];
+        let pools = vec![p > 0, p > 1, p > 2, p > 3, false, true, false];
+        let mut cin = cfg.in_channels;
+        let mut convs = Vec::new();
+        for (i, (&w, &pad)) in widths.iter().zip(&pads).enumerate() {
+            convs.push(Conv::new(&format!("{path}.convs.{i}"), cin, w, 3, pad, init, device));
+            cin = w;
+        }
+        Ok(CnnEncoder { convs, pools })
+    }
+
+    fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        let mut x = x;
+        for (conv, &pool) in self.convs.iter().zip(&self.pools) {
+            x = relu(conv.forward(x));
+            if pool {
+                x = max_pool2(x);
+            }
+        }
+        x
+    }
+}
+
+fn cnn_widths(n: usize) -> [usize; 7] {
+    [n / 4, n / 2, n, 2 * n, 2 * n, 4 * n, 4 * n]
+}
+
+/// CNN SAC actor `SACGaussianPolicyFullyConv`: encoder + 1×1 conv to 10 channels
+/// (mean = 0..5, log_std = 5..10).
+#[derive(Module, Debug)]
+pub struct CnnActor {
+    /// Encoder.
+    pub enc: CnnEncoder,
+    /// 1×1 head.
+    pub head: Conv,
+}
+
+impl CnnActor {
+    /// Build with weights from `init`.
+    pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
+        let w = cnn_widths(cfg.hidden);
+        Ok(CnnActor {
+            enc: CnnEncoder::new("enc", cfg, w, init, device)?,
+            head: Conv::new("head", w[6], 10, 1, 0, init, device),
+        })
+    }
+}
+
+impl Actor for CnnActor {
+    fn forward(&self, obs: Tensor<4>) -> (Tensor<2>, Tensor<2>) {
+        let y = self.head.forward(self.enc.forward(obs));
+        let [b, c, _, _] = y.dims();
+        let y: Tensor<2> = y.reshape([b, c]);
+        (y.clone().narrow(1, 0, 5), y.narrow(1, 5, 5).clamp(LOG_STD_MIN, LOG_STD_MAX))
+    }
+}
+
+/// One plain Q head: 1×1 conv (enc + 5 → width) → ReLU → 1×1 conv (width → 1).
+#[derive(Module, Debug)]
+pub struct CnnQHead {
+    /// First 1×1 conv.
+    pub conv1: Conv,
+    /// Second 1×1 conv.
+    pub conv2: Conv,
+}
+
+impl CnnQHead {
+    fn forward(&self, x: Tensor<4>) -> Tensor<2> {
+        let q = self.conv2.forward(relu(self.conv1.forward(x)));
+        let [b, _, _, _] = q.dims();
+        q.reshape([b, 1])
+    }
+}
+
+/// CNN SAC twin critic `SACCriticFullyConv`.
+#[derive(Module, Debug)]
+pub struct CnnCritic {
+    /// Encoder.
+    pub enc: CnnEncoder,
+    /// Q1 head.
+    pub q1: CnnQHead,
+    /// Q2 head.
+    pub q2: CnnQHead,
+}
+
+impl CnnCritic {
+    /// Build with weights from `init`.
+    pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
+        let w = cnn_widths(cfg.hidden);
+        let head = |name: &str| CnnQHead {
+            conv1: Conv::new(&format!("{name}.conv1"), w[6] + 5, w[6], 1, 0, init, device),
+            conv2: Conv::new(&format!("{name}.conv2"), w[6], 1, 1, 0, init, device),
+        };
+        Ok(CnnCritic { enc: CnnEncoder::new("enc", cfg, w, init, device)?, q1: head("q1"), q2: head("q2") })
+    }
+}
+
+impl Critic for CnnCritic {
+    fn forward(&self, obs: Tensor<4>, action: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
+        let [b, a] = action.dims();
+        let x = Tensor::cat(vec![self.enc.forward(obs), action.reshape([b, a, 1, 1])], 1);
+        (self.q1.forward(x.clone()), self.q2.forward(x))
+    }
+}
+
+/// SEN fc2 encoder `SACEncoderSimFC2` (PAPER_SPEC §1.9): convs of widths `n/2, n, 2n, 4n`
+/// (3×3, pad 1, pooled down to 8×8), `2n` at 8×8, flatten, Linear → `8n` + ReLU, declared as
+/// `n` regular D4 fields at 1×1 (paper n = 32).
+#[derive(Module, Debug)]
+pub struct SenEncoder {
+    /// The 5 convs.
+    pub convs: Vec<Conv>,
+    /// The linear layer.
+    pub fc: Linear,
+    pools: Vec<bool>,
+}
+
+impl SenEncoder {
+    fn new(path: &str, cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
+        let p = cfg.pools()?;
+        let n = cfg.hidden;
+        let widths = [n / 2, n, 2 * n, 4 * n, 2 * n];
+        let pools = vec![p > 0, p > 1, p > 2, p > 3, false];
+        let mut cin = cfg.in_channels;
+        let mut convs = Vec::new();
+        for (i, &w) in widths.iter().enumerate() {
+            convs.push(Conv::new(&format!("{path}.convs.{i}"), cin, w, 3, 1, init, device));
+            cin = w;
+        }
+        let fc = Linear::new(&format!("{path}.fc"), 2 * n * 64, 8 * n, init, device);
+        Ok(SenEncoder { convs, fc, pools })
+    }
+
+    fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        let mut x = x;
+        for (conv, &pool) in self.convs.iter().zip(&self.pools) {
+            x = relu(conv.forward(x));
+            if pool {
+                x = max_pool2(x);
+            }
+        }
+        let [b, c, h, w] = x.dims();
+        let y = relu(self.fc.forward(x.reshape([b, c * h * w])));
+        let [_, f] = y.dims();
+        y.reshape([b, f, 1, 1])
+    }
+}
+
+/// SEN fc2 actor: [`SenEncoder`] + the Equi actor head (`hidden × regular → actor_out_type`).
+#[derive(Module, Debug)]
+pub struct SenActor {
+    /// Non-equivariant encoder.
+    pub enc: SenEncoder,
+    /// Equivariant 1×1 head.
+    pub head: EquivariantConv,
+}
+
+impl SenActor {
+    /// Build with weights from `init` (paper: [`NetConfig::paper_sen`]).
+    pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
+        let g = Group::dihedral(4);
+        Ok(SenActor {
+            enc: SenEncoder::new("enc", cfg, init, device)?,
+            head: EquivariantConv::new("head", &FieldType::regular(g, cfg.hidden), &actor_out_type(g), 1, 0, init, device)?,
+        })
+    }
+}
+
+impl Actor for SenActor {
+    fn forward(&self, obs: Tensor<4>) -> (Tensor<2>, Tensor<2>) {
+        let y = self.head.forward(self.enc.forward(obs));
+        let [b, c, _, _] = y.dims();
+        decode_equi(y.reshape([b, c]))
+    }
+}
+
+/// SEN fc2 twin critic: [`SenEncoder`] + two Equi Q heads.
+#[derive(Module, Debug)]
+pub struct SenCritic {
+    /// Non-equivariant encoder.
+    pub enc: SenEncoder,
+    /// Q1 head.
+    pub q1: EquiQHead,
+    /// Q2 head.
+    pub q2: EquiQHead,
+}
+
+impl SenCritic {
+    /// Build with weights from `init` (paper: [`NetConfig::paper_sen`]).
+    pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
+        let g = Group::dihedral(4);
+        let t = FieldType::regular(g, cfg.hidden).concat(&action_type(g));
+        Ok(SenCritic {
+            enc: SenEncoder::new("enc", cfg, init, device)?,
+            q1: EquiQHead::new("q1", &t, cfg.hidden, init, device)?,
+            q2: EquiQHead::new("q2", &t, cfg.hidden, init, device)?,
+        })
+    }
+}
+
+impl Critic for SenCritic {
+    fn forward(&self, obs: Tensor<4>, action: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
+        let x = concat(vec![self.enc.forward(obs), lift_action(action)]);
+        (self.q1.forward(x.clone()), self.q2.forward(x))
+    }
+}
+
+/// C8 rotation-estimation classifier (PAPER_SPEC §4 "Equi"): [`EquiEncoder`] over C8 + 1×1
+/// `hidden × regular → 8 × trivial` (class logits, invariant).
+#[derive(Module, Debug)]
+pub struct RotEquiNet {
+    /// Encoder (group C8).
+    pub enc: EquiEncoder,
+    /// 1×1 head.
+    pub head: EquivariantConv,
+}
+
+impl RotEquiNet {
+    /// Build with weights from `init` (paper: [`NetConfig::paper_rotation`]).
+    pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
+        let g = Group::cyclic(8);
+        Ok(RotEquiNet {
+            enc: EquiEncoder::new("enc", g, cfg, init, device)?,
+            head: EquivariantConv::new("head", &FieldType::regular(g, cfg.hidden), &FieldType::trivial(g, 8), 1, 0, init, device)?,
+        })
+    }
+
+    /// `[B, in_channels, S, S] → logits [B, 8]`.
+    pub fn forward(&self, x: Tensor<4>) -> Tensor<2> {
+        let y = self.head.forward(self.enc.forward(x));
+        let [b, c, _, _] = y.dims();
+        y.reshape([b, c])
+    }
+}
+
+/// Rotation-estimation CNN (`cnn_sim`, PAPER_SPEC §4): widths `n/4, n/2, n, 2n` (pooled to 8×8),
+/// `4n` pad 1, `4n` pad 0, pool, `2n` pad 0, 1×1 → 8 logits (paper n = 64).
+#[derive(Module, Debug)]
+pub struct RotCnnNet {
+    /// The 7 3×3 convs.
+    pub convs: Vec<Conv>,
+    /// 1×1 head.
+    pub head: Conv,
+    pools: Vec<bool>,
+}
+
+impl RotCnnNet {
+    /// Build with weights from `init` (paper: [`NetConfig::paper_rotation`]).
+    pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
+        let p = cfg.pools()?;
+        let n = cfg.hidden;
+        let widths = [n / 4, n / 2, n, 2 * n, 4 * n, 4 * n, 2 * n];
+        let pads = [1, 1, 1, 1, 1, 0, 0];
+        let pools = vec![p > 0, p > 1, p > 2, p > 3, false, true, false];
+        let mut cin = cfg.in_channels;
+        let mut convs = Vec::new();
+        for (i, (&w, &pad)) in widths.iter().zip(&pads).enumerate() {
+            convs.push(Conv::new(&format!("convs.{i}"), cin, w, 3, pad, init, device));
+            cin = w;
+        }
+        Ok(RotCnnNet { convs, head: Conv::new("head", cin, 8, 1, 0, init, device), pools })
+    }
+
+    /// `[B, in_channels, S, S] → logits [B, 8]`.
+    pub fn forward(&self, x: Tensor<4>) -> Tensor<2> {
+        let mut x = x;
+        for (conv, &pool) in self.convs.iter().zip(&self.pools) {
+            x = relu(conv.forward(x));
+            if pool {
+                x = max_pool2(x);
+            }
+        }
+        let y = self.head.forward(x);
+        let [b, c, _, _] = y.dims();
+        y.reshape([b, c])
+    }
+}
+
+/// SAC's squashed Gaussian sample (PAPER_SPEC §1.4): with noise `eps ~ N(0, 1)` `[B, 5]`,
+/// `x = mean + std·eps`, `a = tanh(x)`, `log π = Σ_i [log N(x_i; mean_i, std_i) − log(1 − a_i² + 1e-6)]`.
+/// Returns `(a, log π [B, 1], tanh(mean))`.
+pub fn gaussian_sample(mean: Tensor<2>, log_std: Tensor<2>, eps: Tensor<2>) -> (Tensor<2>, Tensor<2>, Tensor<2>) {
+    let std = log_std.clone().exp();
+    let x = mean.clone() + std * eps.clone();
+    let a = x.tanh();
+    let half_log_2pi = 0.5 * (2.0 * std::f32::consts::PI).ln();
+    let log_n = eps.powf_scalar(2.0).mul_scalar(-0.5) - log_std - half_log_2pi;
+    let corr = (a.clone().powf_scalar(2.0).neg() + 1.0 + 1e-6).log();
+    let log_pi = (log_n - corr).sum_dim(1);
+    (a, log_pi, mean.tanh())
+}
