@@ -2,7 +2,7 @@
 """Peer benchmark for crates/nn: the Equi SAC actor (PyTorch + e2cnn, the authors' stack) and the
 CNN SAC actor (plain PyTorch), same shapes as equiarm_nn's nets (PAPER_SPEC §1.4, §1.8).
 
-Run with any python3: on first use it creates bench/.venv, installs torch (CPU wheel) and e2cnn
+Run with any python3: on first use it creates a venv under ~/.cache/equiarm/venvs, installs torch and e2cnn
 from PyPI into it, and re-executes itself there. Prints one JSON object per line:
 {"net", "config", "mode", "median_s", "runs"}. Called by `cargo bench -p equiarm_nn --bench actors`,
 which interleaves these figures with its own and prints ratios.
@@ -18,7 +18,8 @@ import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-VENV = os.path.join(HERE, ".venv")
+# Outside the clone (torch from PyPI is several GB); EQUIARM_VENV_DIR moves it.
+VENV = os.path.join(os.environ.get("EQUIARM_VENV_DIR", os.path.expanduser("~/.cache/equiarm/venvs")), "e2cnn-peer")
 VPY = os.path.join(VENV, "bin", "python")
 
 
@@ -31,13 +32,11 @@ def ensure_venv():
     except ImportError:
         pass
     if os.path.abspath(sys.executable) == os.path.abspath(VPY):
-        sys.exit("bench/.venv exists but lacks torch or e2cnn; delete bench/.venv and retry")
+        sys.exit(f"{VENV} exists but lacks torch or e2cnn; delete it and retry")
     if not os.path.exists(VPY):
         subprocess.check_call([sys.executable, "-m", "venv", VENV])
         pip = [VPY, "-m", "pip", "install", "--quiet"]
-        # CPU-only wheel first (small); fall back to the default index.
-        if subprocess.call(pip + ["torch", "--index-url", "https://download.pytorch.org/whl/cpu"]) != 0:
-            subprocess.check_call(pip + ["torch"])
+        subprocess.check_call(pip + ["torch"])
         # e2cnn 0.2.3 calls ndarray.tostring(), removed in numpy 2.
         subprocess.check_call(pip + ["e2cnn", "scipy", "numpy<2"])
     os.execv(VPY, [VPY] + sys.argv)
