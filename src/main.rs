@@ -36,6 +36,9 @@ enum Command {
     /// Bags: describe, evaluate, repair.
     #[command(subcommand)]
     Bag(BagCommand),
+    /// Networks: diagnostics of saved (or freshly initialised) equivariant networks.
+    #[command(subcommand)]
+    Nn(NnCommand),
 }
 
 #[derive(clap::Args)]
@@ -73,6 +76,40 @@ enum CompressionArg {
     None,
     Lz4,
     Zstd,
+}
+
+#[derive(Subcommand)]
+enum NnCommand {
+    /// Measures a network's equivariance error ||f(g.x) - g.f(x)|| / ||f(x)|| per group element on
+    /// random inputs: near 1e-6 for a correct equivariant network, trained or not.
+    CheckEquivariance {
+        /// safetensors checkpoint of the network (omit with --fresh).
+        checkpoint: Option<std::path::PathBuf>,
+        /// Check the seeded initial weights instead of a file.
+        #[arg(long, conflicts_with = "checkpoint")]
+        fresh: bool,
+        /// Which network the file holds: equi-actor, equi-critic or rot-equi.
+        #[arg(long, default_value = "equi-actor")]
+        net: String,
+        /// Architecture: `paper` (hidden 64, 128 px) or `reduced` (hidden 16, 64 px); the flags below override it.
+        #[arg(long, default_value = "paper")]
+        config: String,
+        /// Hidden size (regular fields of the encoder output).
+        #[arg(long)]
+        hidden: Option<usize>,
+        /// Input size in pixels.
+        #[arg(long)]
+        size: Option<usize>,
+        /// Input channels.
+        #[arg(long)]
+        channels: Option<usize>,
+        /// Random inputs to average over.
+        #[arg(long, default_value_t = 2)]
+        batch: usize,
+        /// Seed of the inputs (and of the fresh weights).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+    },
 }
 
 #[derive(Subcommand)]
@@ -247,6 +284,29 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             };
             let opts = RosOptions::from_env()?;
             runtime()?.block_on(equiarm_nodes::recorder::run(&opts, cfg))?;
+        }
+        Command::Nn(NnCommand::CheckEquivariance { checkpoint, fresh, net, config, hidden, size, channels, batch, seed }) => {
+            use equiarm_nn::nets::NetConfig;
+            let kind: equiarm_nn::diagnostics::NetKind = net.parse().map_err(anyhow::Error::msg)?;
+            let mut cfg = match (config.as_str(), kind) {
+                ("paper", equiarm_nn::diagnostics::NetKind::RotEqui) => NetConfig::paper_rotation(),
+                ("paper", _) => NetConfig::paper(),
+                ("reduced", _) => NetConfig::reduced_cpu(),
+                (other, _) => bail!("unknown --config '{other}': use paper or reduced"),
+            };
+            cfg.hidden = hidden.unwrap_or(cfg.hidden);
+            cfg.input_size = size.unwrap_or(cfg.input_size);
+            cfg.in_channels = channels.unwrap_or(cfg.in_channels);
+            if checkpoint.is_none() && !fresh {
+                bail!("give a checkpoint file, or --fresh to check the seeded initial weights");
+            }
+            let device = equiarm_nn::burn::tensor::Device::flex();
+            let errors = equiarm_nn::diagnostics::check_checkpoint(kind, &cfg, checkpoint.as_deref(), batch, seed, &device)
+                .with_context(|| format!("checking the equivariance of a {net} ({config} config)"))?;
+            println!("element (flip, rot)   relative error");
+            for e in errors {
+                println!("({}, {})                {:.3e}", e.element.flip, e.element.rot, e.relative_error);
+            }
         }
         Command::Bag(BagCommand::Info { bag }) => {
             let info = equiarm_bag::Reader::open(&bag)?.info()?;

@@ -119,7 +119,7 @@ impl Group {
 
     /// Whether `g` maps the pixel grid onto itself (rotation by a multiple of 90°, possibly mirrored).
     pub fn acts_on_grid(&self, g: Element) -> bool {
-        (4 * g.rot) % self.n == 0
+        (4 * g.rot).is_multiple_of(self.n)
     }
 
     /// Number of quarter turns of `g` if it acts on the pixel grid.

@@ -74,7 +74,7 @@ impl NetConfig {
 
     /// Number of 2×2 pools in layers 1–4.
     fn pools(&self) -> Result<usize, NetError> {
-        if self.hidden == 0 || self.hidden % 8 != 0 {
+        if self.hidden == 0 || !self.hidden.is_multiple_of(8) {
             return Err(NetError::Config(format!("hidden size {} must be a positive multiple of 8", self.hidden)));
         }
         if self.in_channels == 0 {
