@@ -302,7 +302,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             let device = equiarm_nn::burn::tensor::Device::flex();
             let errors = equiarm_nn::diagnostics::check_checkpoint(kind, &cfg, checkpoint.as_deref(), batch, seed, &device)
-                .with_context(|| format!("checking the equivariance of a {net} ({config} config)"))?;
+                .with_context(|| format!("checking the equivariance of {net} ({config} config)"))?;
             println!("element (flip, rot)   relative error");
             for e in errors {
                 println!("({}, {})                {:.3e}", e.element.flip, e.element.rot, e.relative_error);
