@@ -30,6 +30,27 @@ fn record(domain: u16, out: &Path, args: &[&str]) -> Child {
         .unwrap()
 }
 
+/// Starts `equiarm bag play BAG ARGS` on `domain`.
+fn play(domain: u16, bag: &Path, args: &[&str]) -> Child {
+    equiarm()
+        .args(["bag", "play"])
+        .args(args)
+        .arg(bag)
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+/// Waits for a player to exit successfully and returns what it printed.
+fn play_output(mut child: Child) -> String {
+    let status = wait_exit(&mut child, 20);
+    assert!(status.success(), "player exit: {status}");
+    let mut out = String::new();
+    std::io::Read::read_to_string(&mut child.stdout.take().unwrap(), &mut out).unwrap();
+    out
+}
+
 fn wait_exit(child: &mut Child, secs: u64) -> std::process::ExitStatus {
     let start = Instant::now();
     loop {
@@ -198,13 +219,7 @@ fn bag_play_republishes_every_message_in_order_on_remapped_topics() {
     }
     w.finish().unwrap();
 
-    let mut play = equiarm()
-        .args(["bag", "play", "--rate", "2", "--wait-ms", "2000", "--remap", "/rec/gripper_cmd:/played/gripper_cmd"])
-        .arg(&bag)
-        .env("ROS_DOMAIN_ID", "83")
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let player = play(83, &bag, &["--rate", "2", "--wait-ms", "2000", "--remap", "/rec/gripper_cmd:/played/gripper_cmd"]);
     let rt = tokio::runtime::Runtime::new().unwrap();
     let got = rt.block_on(async {
         let mut node = RosNode::new("/", "play_sub", &RosOptions { domain_id: 83, localhost_only: false }).unwrap();
@@ -218,10 +233,7 @@ fn bag_play_republishes_every_message_in_order_on_remapped_topics() {
         }
         got
     });
-    let status = wait_exit(&mut play, 20);
-    assert!(status.success());
-    let mut out = String::new();
-    std::io::Read::read_to_string(&mut play.stdout.take().unwrap(), &mut out).unwrap();
+    let out = play_output(player);
     assert!(out.contains("published 20 messages (0 skipped)"), "{out}");
     assert_eq!(got, (0..20).map(cmd).collect::<Vec<_>>());
 }
@@ -241,13 +253,7 @@ fn bag_play_lockstep_waits_for_the_command_naming_each_observation() {
     }
     w.finish().unwrap();
 
-    let mut play = equiarm()
-        .args(["bag", "play", "--lockstep", "300", "--wait-ms", "2000", "--remap", "/env0/observation:/ls/observation"])
-        .arg(&bag)
-        .env("ROS_DOMAIN_ID", "84")
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let player = play(84, &bag, &["--lockstep", "300", "--wait-ms", "2000", "--remap", "/env0/observation:/ls/observation"]);
     let rt = tokio::runtime::Runtime::new().unwrap();
     let seen = rt.block_on(async {
         let mut node = RosNode::new("/", "policy", &RosOptions { domain_id: 84, localhost_only: false }).unwrap();
@@ -267,10 +273,7 @@ fn bag_play_lockstep_waits_for_the_command_naming_each_observation() {
         }
         seen
     });
-    let status = wait_exit(&mut play, 20);
-    assert!(status.success());
-    let mut out = String::new();
-    std::io::Read::read_to_string(&mut play.stdout.take().unwrap(), &mut out).unwrap();
+    let out = play_output(player);
     assert!(out.contains("published 5 messages (0 skipped)"), "{out}");
     assert_eq!(seen, [10, 11, 12, 12, 13, 14], "observations as the policy saw them");
 }
