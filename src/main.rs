@@ -129,6 +129,16 @@ enum BagCommand {
         /// Print JSON instead of a table.
         #[arg(long)]
         json: bool,
+        /// Instead of episode metrics: run this actor checkpoint (safetensors) over the recorded
+        /// Transitions and report its agreement with the recorded actions per dimension.
+        #[arg(long, value_name = "CKPT")]
+        policy: Option<std::path::PathBuf>,
+        /// The checkpoint's network: equi or cnn.
+        #[arg(long, default_value = "equi")]
+        net: String,
+        /// The checkpoint's architecture: paper (hidden 64, 128 px) or reduced (hidden 16, 64 px).
+        #[arg(long, default_value = "paper")]
+        config: String,
     },
     /// Re-publishes a bag's messages on their topics at the recorded pace (like `ros2 bag play`).
     Play {
@@ -312,7 +322,29 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let info = equiarm_bag::Reader::open(&bag)?.info()?;
             print!("{}", equiarm_nodes::bag_tools::info_text(&bag, &info));
         }
-        Command::Bag(BagCommand::Eval { bag, gamma, json }) => {
+        Command::Bag(BagCommand::Eval { bag, policy: Some(ckpt), net, config, json, .. }) => {
+            let cfg = match config.as_str() {
+                "paper" => equiarm_nn::nets::NetConfig::paper(),
+                "reduced" => equiarm_nn::nets::NetConfig::reduced_cpu(),
+                other => bail!("unknown --config '{other}': use paper or reduced"),
+            };
+            let a = equiarm_nodes::policy_eval::evaluate(&bag, &ckpt, &net, &cfg)
+                .with_context(|| format!("evaluating {} on {}", ckpt.display(), bag.display()))?;
+            if json {
+                let dims: Vec<_> = (0..5)
+                    .map(|d| serde_json::json!({"dim": equiarm_nodes::policy_eval::DIMS[d], "mae": a.mae[d],
+                        "sign_agreement": a.sign[d], "correlation": a.corr[d]}))
+                    .collect();
+                println!("{}", serde_json::json!({"transitions": a.n, "dims": dims}));
+            } else {
+                println!("{} transitions; policy (tanh of mean) vs recorded action, normalised units", a.n);
+                println!("{:<8} {:>10} {:>14} {:>12}", "dim", "mean |d|", "same sign", "correlation");
+                for d in 0..5 {
+                    println!("{:<8} {:>10.4} {:>14.3} {:>12.3}", equiarm_nodes::policy_eval::DIMS[d], a.mae[d], a.sign[d], a.corr[d]);
+                }
+            }
+        }
+        Command::Bag(BagCommand::Eval { bag, gamma, json, policy: None, .. }) => {
             let report = equiarm_nodes::bag_tools::eval(&bag, gamma)?;
             if json {
                 println!("{}", report.json()?);

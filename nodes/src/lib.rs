@@ -8,3 +8,4 @@ pub mod recorder;
 pub mod bag_tools;
 pub mod player;
 pub mod sim;
+pub mod policy_eval;

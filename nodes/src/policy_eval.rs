@@ -1,0 +1,171 @@
+//! `equiarm bag eval BAG --policy CKPT`: runs an actor over the observations recorded in a bag's
+//! `Transition`s and reports, per action dimension, how its greedy action (tanh of the mean) agrees
+//! with the action that was recorded, both in the agent's normalised [-1, 1] units
+//! (p = 2·open_ratio − 1, dx/0.05, dy/0.05, dz/0.05, dθ/(π/4), PAPER_SPEC §1.2).
+//!
+//! Network input, as the paper feeds it (PAPER_SPEC §1.1): channels R, G, B (÷255), depth (m) and
+//! the holding flag as a constant plane, centre-cropped to the network's input size.
+//!
+//! ## Limitations
+//! The architecture is given on the command line (`--net`, `--config`): the checkpoint file holds
+//! only tensors. Observations smaller than the network's input are an error.
+
+use std::path::Path;
+
+use anyhow::{Context as _, bail};
+use equiarm_bag::{ReadMode, Reader};
+use equiarm_msgs::msg::{GripperCommand, Observation, Transition};
+use equiarm_msgs::{RosMessage, cdr};
+use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
+use equiarm_nn::init::Init;
+use equiarm_nn::nets::{Actor, CnnActor, EquiActor, NetConfig};
+
+/// Transitions evaluated per forward pass.
+const BATCH: usize = 32;
+
+/// Action dimension names, in the network's order.
+pub const DIMS: [&str; 5] = ["p", "dx", "dy", "dz", "dtheta"];
+
+/// The recorded action in the agent's normalised units.
+pub fn normalised(c: &GripperCommand) -> [f32; 5] {
+    [
+        2.0 * c.open_ratio - 1.0,
+        c.dx / 0.05,
+        c.dy / 0.05,
+        c.dz / 0.05,
+        c.dtheta / std::f32::consts::FRAC_PI_4,
+    ]
+}
+
+/// The 5 × S × S network input of an observation (centre crop to `size`).
+pub fn network_input(obs: &Observation, size: usize) -> anyhow::Result<Vec<f32>> {
+    let rgb = obs.color.rgb8_data().context("observation colour")?;
+    let depth = obs.depth.float32_values().context("observation depth")?;
+    let (h, w) = (obs.color.height as usize, obs.color.width as usize);
+    if (obs.depth.height as usize, obs.depth.width as usize) != (h, w) {
+        bail!("colour is {h}x{w} but depth is {}x{}", obs.depth.height, obs.depth.width);
+    }
+    if h < size || w < size {
+        bail!("observation of {h}x{w} px is smaller than the network's {size}x{size} input");
+    }
+    let (r0, c0) = ((h - size) / 2, (w - size) / 2);
+    let plane = size * size;
+    let mut x = vec![0f32; 5 * plane];
+    for r in 0..size {
+        for c in 0..size {
+            let src = (r0 + r) * w + (c0 + c);
+            let dst = r * size + c;
+            for ch in 0..3 {
+                x[ch * plane + dst] = rgb[3 * src + ch] as f32 / 255.0;
+            }
+            x[3 * plane + dst] = depth[src];
+            x[4 * plane + dst] = obs.holding as u8 as f32;
+        }
+    }
+    Ok(x)
+}
+
+/// Per-dimension agreement between the policy and the recorded actions.
+#[derive(Clone, Debug, Default)]
+pub struct Agreement {
+    /// Transitions evaluated.
+    pub n: usize,
+    /// Mean |policy − recorded| per dimension (normalised units).
+    pub mae: [f64; 5],
+    /// Fraction with the same sign per dimension.
+    pub sign: [f64; 5],
+    /// Pearson correlation per dimension (NaN when either side is constant).
+    pub corr: [f64; 5],
+}
+
+fn agreement(pairs: &[([f32; 5], [f32; 5])]) -> Agreement {
+    let n = pairs.len();
+    let mut a = Agreement { n, ..Default::default() };
+    for d in 0..5 {
+        let (xs, ys): (Vec<f64>, Vec<f64>) = pairs.iter().map(|(p, r)| (p[d] as f64, r[d] as f64)).unzip();
+        let nf = n as f64;
+        a.mae[d] = xs.iter().zip(&ys).map(|(x, y)| (x - y).abs()).sum::<f64>() / nf;
+        a.sign[d] = xs.iter().zip(&ys).filter(|(x, y)| x.signum() == y.signum()).count() as f64 / nf;
+        let (mx, my) = (xs.iter().sum::<f64>() / nf, ys.iter().sum::<f64>() / nf);
+        let cov: f64 = xs.iter().zip(&ys).map(|(x, y)| (x - mx) * (y - my)).sum();
+        let vx: f64 = xs.iter().map(|x| (x - mx).powi(2)).sum();
+        let vy: f64 = ys.iter().map(|y| (y - my).powi(2)).sum();
+        a.corr[d] = cov / (vx * vy).sqrt();
+    }
+    a
+}
+
+/// Runs the actor in `checkpoint` (`net`: `equi` or `cnn`; `cfg` its architecture) over every
+/// `Transition` in `bag`.
+pub fn evaluate(bag: &Path, checkpoint: &Path, net: &str, cfg: &NetConfig) -> anyhow::Result<Agreement> {
+    let device = Device::flex();
+    let init = Init::new(0);
+    let actor: Box<dyn Actor> = match net {
+        "equi" => Box::new(equiarm_nn::checkpoint::load(EquiActor::new(cfg, &init, &device)?, checkpoint)?.cache_kernels()),
+        "cnn" => Box::new(equiarm_nn::checkpoint::load(CnnActor::new(cfg, &init, &device)?, checkpoint)?),
+        other => bail!("unknown --net '{other}': use equi or cnn"),
+    };
+    let s = cfg.input_size;
+    let (mut inputs, mut recorded, mut pairs) = (Vec::new(), Vec::new(), Vec::new());
+    let mut run = |inputs: &mut Vec<f32>, recorded: &mut Vec<[f32; 5]>| -> anyhow::Result<()> {
+        let b = recorded.len();
+        if b == 0 {
+            return Ok(());
+        }
+        let x = Tensor::<4>::from_data(TensorData::new(std::mem::take(inputs), [b, 5, s, s]), &device);
+        let (mean, _) = actor.forward(x);
+        let out = mean.tanh().into_data().try_to_vec::<f32>().map_err(|e| anyhow::anyhow!("reading actions: {e:?}"))?;
+        for (i, r) in recorded.drain(..).enumerate() {
+            let mut p = [0f32; 5];
+            p.copy_from_slice(&out[5 * i..5 * i + 5]);
+            pairs.push((p, r));
+        }
+        Ok(())
+    };
+    let reader = Reader::open(bag)?;
+    let mut failure = None;
+    reader.for_each(ReadMode::Salvage, |m| {
+        if m.type_name != Transition::TYPE_NAME {
+            return Ok(());
+        }
+        let step = (|| -> anyhow::Result<()> {
+            let t = cdr::decode::<Transition>(m.data)?;
+            inputs.extend(network_input(&t.obs, s).with_context(|| format!("{} seq {}", m.topic, t.obs.seq))?);
+            recorded.push(normalised(&t.action));
+            if recorded.len() == BATCH {
+                run(&mut inputs, &mut recorded)?;
+            }
+            Ok(())
+        })();
+        step.map_err(|e| failure = Some(e))
+    })?
+    .ok();
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    run(&mut inputs, &mut recorded)?;
+    if pairs.is_empty() {
+        bail!("{}: no Transition messages to evaluate the policy on", bag.display());
+    }
+    Ok(agreement(&pairs))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn recorded_actions_normalise_like_the_paper() {
+        let c = GripperCommand { open_ratio: 1.0, dx: 0.05, dy: -0.025, dz: 0.0, dtheta: -std::f32::consts::FRAC_PI_4, ..Default::default() };
+        assert_eq!(normalised(&c), [1.0, 1.0, -0.5, 0.0, -1.0]);
+    }
+
+    #[test]
+    fn identical_actions_agree_fully() {
+        let pairs = vec![([0.5, -0.2, 0.1, 0.3, -0.9], [0.5, -0.2, 0.1, 0.3, -0.9]), ([-0.5, 0.2, -0.1, -0.3, 0.9], [-0.5, 0.2, -0.1, -0.3, 0.9])];
+        let a = agreement(&pairs);
+        assert_eq!(a.mae, [0.0; 5]);
+        assert_eq!(a.sign, [1.0; 5]);
+        assert!(a.corr.iter().all(|c| (c - 1.0).abs() < 1e-12));
+    }
+}
