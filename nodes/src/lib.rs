@@ -2,6 +2,9 @@
 //!
 //! [`ros`] is the only module that talks to ros2-client; each node maps topics to library calls.
 
+#[cfg(not(any(feature = "jazzy", feature = "humble")))]
+compile_error!("equiarm_nodes needs a ROS 2 distro feature: `jazzy` (the default) or `humble`");
+
 pub mod ros;
 pub mod echo;
 pub mod recorder;

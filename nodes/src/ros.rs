@@ -3,10 +3,10 @@
 //! subscriptions on tokio, the spinner task, and shutdown on SIGINT/SIGTERM.
 //!
 //! ## Distro
-//! ros2-client is built with its `jazzy` feature (see the workspace `Cargo.toml`): Jazzy and every
-//! later distro (Kilted, Lyrical, Rolling) use the 16-byte Gid in `ros_discovery_info`, so `ros2 node
-//! list` and `ros2 topic` see our nodes there. Humble uses a 24-byte Gid; Humble users must rebuild
-//! with ros2-client's `humble` feature instead. Topic data (CDR) is the same for all distros.
+//! ros2-client is built with its `jazzy` feature by default (this crate's `jazzy` feature): Jazzy and
+//! every later distro (Kilted, Lyrical, Rolling) use the 16-byte Gid in `ros_discovery_info`, so
+//! `ros2 node list` and `ros2 topic` see our nodes there. Humble uses a 24-byte Gid: Humble users build
+//! with `--no-default-features --features humble`. Topic data (CDR) is the same for all distros.
 //!
 //! ## Limitations
 //! - Parameter services are off: ros2-client answers them only with the Fast DDS ("Enhanced")
