@@ -268,24 +268,32 @@ pub struct EquiCritic {
     pub q2: EquiQHead,
 }
 
+/// The twin heads `q1`, `q2` shared by the critics whose encoder ends in `hidden × regular` D4
+/// fields (Equi and SEN): input type `hidden × regular ⊕` [`action_type`].
+fn equi_twin_heads(cfg: &NetConfig, init: &Init, device: &Device) -> Result<(EquiQHead, EquiQHead), NetError> {
+    let g = Group::dihedral(4);
+    let t = FieldType::regular(g, cfg.hidden).concat(&action_type(g));
+    Ok((EquiQHead::new("q1", &t, cfg.hidden, init, device)?, EquiQHead::new("q2", &t, cfg.hidden, init, device)?))
+}
+
+/// Both heads on the encoder output with the lifted action appended.
+fn equi_twin_forward(q1: &EquiQHead, q2: &EquiQHead, enc_out: Tensor<4>, action: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
+    let x = concat(vec![enc_out, lift_action(action)]);
+    (q1.forward(x.clone()), q2.forward(x))
+}
+
 impl EquiCritic {
     /// Build with weights from `init`.
     pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
-        let g = Group::dihedral(4);
-        let enc = EquiEncoder::new("enc", g, cfg, init, device)?;
-        let t = FieldType::regular(g, cfg.hidden).concat(&action_type(g));
-        Ok(EquiCritic {
-            enc,
-            q1: EquiQHead::new("q1", &t, cfg.hidden, init, device)?,
-            q2: EquiQHead::new("q2", &t, cfg.hidden, init, device)?,
-        })
+        let enc = EquiEncoder::new("enc", Group::dihedral(4), cfg, init, device)?;
+        let (q1, q2) = equi_twin_heads(cfg, init, device)?;
+        Ok(EquiCritic { enc, q1, q2 })
     }
 }
 
 impl Critic for EquiCritic {
     fn forward(&self, obs: Tensor<4>, action: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
-        let x = concat(vec![self.enc.forward(obs), lift_action(action)]);
-        (self.q1.forward(x.clone()), self.q2.forward(x))
+        equi_twin_forward(&self.q1, &self.q2, self.enc.forward(obs), action)
     }
 }
 
@@ -491,20 +499,15 @@ pub struct SenCritic {
 impl SenCritic {
     /// Build with weights from `init` (paper: [`NetConfig::paper_sen`]).
     pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
-        let g = Group::dihedral(4);
-        let t = FieldType::regular(g, cfg.hidden).concat(&action_type(g));
-        Ok(SenCritic {
-            enc: SenEncoder::new("enc", cfg, init, device)?,
-            q1: EquiQHead::new("q1", &t, cfg.hidden, init, device)?,
-            q2: EquiQHead::new("q2", &t, cfg.hidden, init, device)?,
-        })
+        let enc = SenEncoder::new("enc", cfg, init, device)?;
+        let (q1, q2) = equi_twin_heads(cfg, init, device)?;
+        Ok(SenCritic { enc, q1, q2 })
     }
 }
 
 impl Critic for SenCritic {
     fn forward(&self, obs: Tensor<4>, action: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
-        let x = concat(vec![self.enc.forward(obs), lift_action(action)]);
-        (self.q1.forward(x.clone()), self.q2.forward(x))
+        equi_twin_forward(&self.q1, &self.q2, self.enc.forward(obs), action)
     }
 }
 

@@ -30,19 +30,12 @@ fn main() -> Result<(), equiarm_sim::SimError> {
         let (mut ok, mut steps) = (0u64, 0u64);
         let mut failed = Vec::new();
         for seed in 0..n {
-            let mut obs = env.reset(seed)?;
-            loop {
-                let r = env.step(&obs.expert_action)?;
-                obs = r.observation;
-                if r.done {
-                    if r.info.success {
-                        ok += 1;
-                        steps += obs.step as u64;
-                    } else {
-                        failed.push((seed, r.info.invalid));
-                    }
-                    break;
-                }
+            let r = env.run_expert_episode(seed)?;
+            if r.info.success {
+                ok += 1;
+                steps += r.observation.step as u64;
+            } else {
+                failed.push((seed, r.info.invalid));
             }
         }
         println!(

@@ -238,6 +238,19 @@ impl Env {
         })
     }
 
+    /// Resets with `seed` and follows the expert planner to the end of the episode; returns the
+    /// last step's result (its `info` says whether the episode succeeded).
+    pub fn run_expert_episode(&mut self, seed: u64) -> Result<StepResult> {
+        let mut obs = self.reset(seed)?;
+        loop {
+            let r = self.step(&obs.expert_action)?;
+            if r.done {
+                return Ok(r);
+            }
+            obs = r.observation;
+        }
+    }
+
     /// The expert action for the current state (the one in the last observation).
     pub fn expert_action(&self) -> Option<Action> {
         self.episode.as_ref().map(|e| e.expert)

@@ -158,15 +158,7 @@ fn expert_planners_succeed_in_19_of_20_episodes() {
         let mut env = Env::new(cfg).unwrap();
         let mut ok = 0;
         for seed in 1000..1020 {
-            let mut obs = env.reset(seed).unwrap();
-            loop {
-                let r = env.step(&obs.expert_action).unwrap();
-                obs = r.observation;
-                if r.done {
-                    ok += r.info.success as u32;
-                    break;
-                }
-            }
+            ok += env.run_expert_episode(seed).unwrap().info.success as u32;
         }
         println!("{}: {ok}/20", task.name());
         assert!(ok >= 19, "{}: expert succeeded in {ok}/20", task.name());
@@ -192,15 +184,7 @@ fn experts_also_succeed_at_240_hz() {
         let mut env = Env::new(cfg).unwrap();
         let mut ok = 0;
         for seed in 0..10 {
-            let mut obs = env.reset(seed).unwrap();
-            loop {
-                let r = env.step(&obs.expert_action).unwrap();
-                obs = r.observation;
-                if r.done {
-                    ok += r.info.success as u32;
-                    break;
-                }
-            }
+            ok += env.run_expert_episode(seed).unwrap().info.success as u32;
         }
         println!("{} at 240 Hz: {ok}/10", task.name());
         assert!(ok >= 9, "{} at 240 Hz: {ok}/10", task.name());
