@@ -1,7 +1,8 @@
 //! The recorder node (`equiarm record`): subscribes to topics and writes them to a rosbag2 MCAP bag
-//! with `equiarm_bag`. One task per topic decodes nothing it does not need: it re-encodes the message
-//! (CDR, ~memcpy speed) and hands it to the writer task, which owns the bag, flushes it on a timer
-//! (so a kill loses at most the flush interval) and prints a one-line status.
+//! with `equiarm_bag`. One task per topic takes the message ros2-client decoded (it offers no raw
+//! subscription), re-encodes it (CDR, ~memcpy speed) and hands it to the writer task, which owns
+//! the bag, flushes it on a timer (so a kill loses at most the flush interval) and prints a one-line
+//! status.
 //!
 //! ## Limitations
 //! Only the types equiarm knows (`equiarm msg list`) can be recorded: ros2-client offers no
@@ -65,14 +66,12 @@ async fn forward<M: RosMessage>(
     topic: TopicId,
     tx: mpsc::Sender<Sample>,
 ) -> anyhow::Result<()> {
-    let mut buf = Vec::new();
     loop {
         let (msg, info) = sub.recv().await?;
         let log_time = now_ns();
         let publish_time = info.source_timestamp().map(|t| t.to_nanos().max(0) as u64).unwrap_or(log_time);
-        buf.clear();
-        cdr::encode_into(&msg, &mut buf)?;
-        if tx.send(Sample { topic, log_time, publish_time, data: buf.clone() }).await.is_err() {
+        let data = cdr::encode(&msg)?;
+        if tx.send(Sample { topic, log_time, publish_time, data }).await.is_err() {
             return Ok(()); // the writer has finished
         }
     }

@@ -16,7 +16,6 @@
 //!   publish large samples only as fast as the lock-step loop needs.
 
 use std::collections::HashMap;
-use std::marker::PhantomData;
 use std::net::Ipv4Addr;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -177,7 +176,7 @@ impl RosNode {
             .create_subscription::<M>(&t, Some(qos))
             .map_err(|e| anyhow!("creating subscription on '{topic}' ({}): {e:?}", M::TYPE_NAME))?;
         debug!("{}: subscribed to {} on {topic}", self.fqn, M::TYPE_NAME);
-        Ok(Subscriber { inner, topic: topic.to_string(), log: self.bad_input.clone(), _m: PhantomData })
+        Ok(Subscriber { inner, topic: topic.to_string(), log: self.bad_input.clone() })
     }
 
     /// Topics seen on the graph so far (DDS names and type names, e.g. `rt/env0/observation`,
@@ -259,7 +258,6 @@ pub struct Subscriber<M: RosMessage> {
     inner: ros2_client::Subscription<M>,
     topic: String,
     log: Arc<BadInputLog>,
-    _m: PhantomData<M>,
 }
 
 impl<M: RosMessage> Subscriber<M> {
