@@ -1,0 +1,821 @@
+//! The SAC-from-demonstrations agent of PAPER_SPEC §2 (`sacfd`, with RAD or DrQ), over the
+//! networks of `equiarm_nn`:
+//!
+//! - critic step: `y = r + γ·mask·(min Q_targ(s′, a′) − α·log π(a′|s′))`, `a′ ~ π(s′)`, loss
+//!   `MSE(Q1, y) + MSE(Q2, y)`; TD error for PER `½(|Q1 − y| + |Q2 − y|)`;
+//! - actor step: `mean(α·log π(ã|s) − min(Q1, Q2)(s, ã))` plus `expert_weight ×` the MSE between the
+//!   *sampled* action ã and the stored action over the expert rows (only if the batch has some);
+//! - α step: `−mean(log α · (log π + target_entropy))`, log α optimised;
+//! - Polyak target update with τ.
+//!
+//! With DrQ (K next-observation crops, M observation crops) the target is the mean over the K
+//! crops, and the critic, actor and α losses run over the M crops (PAPER_SPEC §1.11). RAD is K = M
+//! = 1 with one crop shared by obs and next_obs (the caller builds the crops).
+//!
+//! Noise comes from the agent's own seeded RNG, so updates are bitwise repeatable on one machine.
+//!
+//! Limitations: the importance-sampling weights of PER are applied only when
+//! [`AgentConfig::use_is_weights`] is set (the paper computes them and does not use them).
+
+use std::path::Path;
+
+use equiarm_nn::burn::module::Module;
+use equiarm_nn::burn::optim::GradientsParams;
+use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
+use equiarm_nn::init::Init;
+use equiarm_nn::nets::{Actor, CnnActor, CnnCritic, Critic, EquiActor, EquiCritic, NetConfig, SenActor, SenCritic, gaussian_sample};
+use rand::SeedableRng as _;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+use crate::optim::{Adam, AdamParams, ScalarAdam, polyak};
+
+/// Errors of the agent.
+#[derive(Debug, Error)]
+pub enum AgentError {
+    /// A network could not be built.
+    #[error("building the {model} networks: {source}")]
+    Net {
+        /// Model name.
+        model: &'static str,
+        /// Cause.
+        source: equiarm_nn::nets::NetError,
+    },
+    /// A batch has inconsistent sizes.
+    #[error("bad batch: {0}")]
+    Batch(String),
+    /// Weights could not be saved or loaded.
+    #[error(transparent)]
+    Weights(#[from] equiarm_nn::checkpoint::CheckpointError),
+    /// Optimiser state could not be saved or loaded.
+    #[error(transparent)]
+    Optim(#[from] crate::optim::OptimError),
+    /// The agent state file is missing or wrong.
+    #[error("{path}: {message}")]
+    State {
+        /// File.
+        path: std::path::PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A loss became NaN or infinite.
+    #[error("update {update}: {what} is not finite ({value})")]
+    NonFinite {
+        /// Update number.
+        update: u64,
+        /// Which quantity.
+        what: &'static str,
+        /// Its value.
+        value: f32,
+    },
+}
+
+/// The network family (PAPER_SPEC §1.4–1.9), by the name used on the command line, in configs,
+/// in `PolicyWeights.model` and in checkpoint manifests.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ModelKind {
+    /// Equivariant SAC over D4 (`equi_both_d`).
+    Equi,
+    /// The CNN SAC baseline, 'conv' variant.
+    Cnn,
+    /// SEN fc2: CNN encoder, equivariant heads.
+    Sen,
+}
+
+impl ModelKind {
+    /// The name: `equi`, `cnn` or `sen`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelKind::Equi => "equi",
+            ModelKind::Cnn => "cnn",
+            ModelKind::Sen => "sen",
+        }
+    }
+
+    /// Parse a name (`equi`, `equi_d4`, `cnn`, `sen`).
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "equi" | "equi_d4" => Some(ModelKind::Equi),
+            "cnn" => Some(ModelKind::Cnn),
+            "sen" => Some(ModelKind::Sen),
+            _ => None,
+        }
+    }
+}
+
+/// How the agent acts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ActMode {
+    /// `tanh(mean + std·ε)`: exploration during training.
+    Sample,
+    /// `tanh(mean)`: evaluation (PAPER_SPEC §2).
+    Greedy,
+}
+
+/// SAC hyper-parameters (PAPER_SPEC §2). Every field has the paper's value by default.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AgentConfig {
+    /// Network family.
+    pub model: ModelKind,
+    /// Hidden size of the networks (paper 64; SEN 32).
+    pub hidden: usize,
+    /// Network input size in pixels after cropping (paper 128).
+    pub input_size: usize,
+    /// Adam learning rate of actor, critic and α.
+    pub lr: f64,
+    /// Discount.
+    pub gamma: f64,
+    /// Polyak coefficient of the target critic.
+    pub tau: f64,
+    /// Initial entropy temperature α.
+    pub init_alpha: f64,
+    /// Target entropy (−action dimension).
+    pub target_entropy: f64,
+    /// Weight of the expert L2 term in the actor loss.
+    pub expert_weight: f64,
+    /// Multiply the critic loss per row by PER's importance weights (the paper does not).
+    pub use_is_weights: bool,
+}
+
+impl Default for AgentConfig {
+    fn default() -> Self {
+        AgentConfig {
+            model: ModelKind::Equi,
+            hidden: 64,
+            input_size: 128,
+            lr: 1e-3,
+            gamma: 0.99,
+            tau: 0.01,
+            init_alpha: 1e-2,
+            target_entropy: -5.0,
+            expert_weight: 1.0,
+            use_is_weights: false,
+        }
+    }
+}
+
+impl AgentConfig {
+    /// The networks' size configuration.
+    pub fn net_config(&self) -> NetConfig {
+        NetConfig { hidden: self.hidden, input_size: self.input_size, in_channels: 5 }
+    }
+}
+
+/// One training batch, already cropped: `obs` holds `m` copies of the `b` rows (copy `j` of row
+/// `i` at index `j·b + i`), each `5 × s × s` (PAPER_SPEC §1.1 channels); `next_obs` holds `k`
+/// copies. Actions are normalised to [−1, 1], order (p, dx, dy, dz, dθ).
+#[derive(Clone, Debug, Default)]
+pub struct Batch {
+    /// Rows.
+    pub b: usize,
+    /// Image size.
+    pub s: usize,
+    /// Copies of obs (DrQ M; 1 for RAD).
+    pub m: usize,
+    /// Copies of next_obs (DrQ K; 1 for RAD).
+    pub k: usize,
+    /// `[m·b, 5, s, s]`.
+    pub obs: Vec<f32>,
+    /// `[k·b, 5, s, s]`.
+    pub next_obs: Vec<f32>,
+    /// `[b, 5]`.
+    pub action: Vec<f32>,
+    /// `[b]`.
+    pub reward: Vec<f32>,
+    /// `[b]`: 0 where the bootstrap is cut (terminal), else 1.
+    pub mask: Vec<f32>,
+    /// `[b]`: 1 for expert rows.
+    pub expert: Vec<f32>,
+    /// `[b]`: PER importance weights (used only with `use_is_weights`).
+    pub weight: Vec<f32>,
+}
+
+impl Batch {
+    fn check(&self) -> Result<(), AgentError> {
+        let plane = 5 * self.s * self.s;
+        let bad = |what: &str, got: usize, want: usize| Err(AgentError::Batch(format!("{what} has {got} values, expected {want}")));
+        if self.b == 0 || self.m == 0 || self.k == 0 {
+            return Err(AgentError::Batch(format!("empty batch (b {}, m {}, k {})", self.b, self.m, self.k)));
+        }
+        if self.obs.len() != self.m * self.b * plane {
+            return bad("obs", self.obs.len(), self.m * self.b * plane);
+        }
+        if self.next_obs.len() != self.k * self.b * plane {
+            return bad("next_obs", self.next_obs.len(), self.k * self.b * plane);
+        }
+        if self.action.len() != 5 * self.b {
+            return bad("action", self.action.len(), 5 * self.b);
+        }
+        for (what, v) in [("reward", &self.reward), ("mask", &self.mask), ("expert", &self.expert), ("weight", &self.weight)] {
+            if v.len() != self.b {
+                return bad(what, v.len(), self.b);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Scalars of one update, named as CleanRL names them.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Metrics {
+    /// `losses/qf1_loss`.
+    pub qf1_loss: f32,
+    /// `losses/qf2_loss`.
+    pub qf2_loss: f32,
+    /// `losses/qf1_values`: mean Q1 on the batch.
+    pub qf1_values: f32,
+    /// `losses/actor_loss` (including the expert term).
+    pub actor_loss: f32,
+    /// `losses/expert_loss`: the expert L2 term alone (0 without expert rows).
+    pub expert_loss: f32,
+    /// `losses/alpha` after the α step.
+    pub alpha: f32,
+    /// `losses/alpha_loss`.
+    pub alpha_loss: f32,
+    /// `losses/entropy`: −mean log π of the actor's samples.
+    pub entropy: f32,
+}
+
+impl Metrics {
+    /// `(name, value)` pairs with CleanRL's names.
+    pub fn named(&self) -> [(&'static str, f64); 8] {
+        [
+            ("losses/qf1_loss", self.qf1_loss as f64),
+            ("losses/qf2_loss", self.qf2_loss as f64),
+            ("losses/qf1_values", self.qf1_values as f64),
+            ("losses/actor_loss", self.actor_loss as f64),
+            ("losses/expert_loss", self.expert_loss as f64),
+            ("losses/alpha", self.alpha as f64),
+            ("losses/alpha_loss", self.alpha_loss as f64),
+            ("losses/entropy", self.entropy as f64),
+        ]
+    }
+}
+
+/// An actor network the agent can train: the `equiarm_nn` actors.
+pub trait ActorNet: Actor + Module + Clone + Send + 'static {
+    /// A copy for fast inference (cached equivariant kernels where the net has them).
+    fn for_inference(&self) -> Self;
+}
+
+/// A critic network the agent can train.
+pub trait CriticNet: Critic + Module + Clone + Send + 'static {}
+
+impl ActorNet for EquiActor {
+    fn for_inference(&self) -> Self {
+        self.valid().cache_kernels()
+    }
+}
+impl ActorNet for CnnActor {
+    fn for_inference(&self) -> Self {
+        self.valid()
+    }
+}
+impl ActorNet for SenActor {
+    fn for_inference(&self) -> Self {
+        self.valid()
+    }
+}
+impl CriticNet for EquiCritic {}
+impl CriticNet for CnnCritic {}
+impl CriticNet for SenCritic {}
+
+/// The agent's saved scalar state (`agent.json` in a checkpoint).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AgentState {
+    /// Updates made.
+    pub updates: u64,
+    /// log α (as IEEE-754 bits: JSON numbers do not round-trip every f64 exactly).
+    pub log_alpha_bits: u64,
+    /// α optimiser: steps, first and second moment (bits).
+    pub alpha_adam: (u64, u64, u64),
+    /// Noise RNG: seed, stream and word position (decimal).
+    pub rng: (String, u64, String),
+}
+
+/// SAC agent over one actor/critic family.
+pub struct Sac<A: ActorNet, C: CriticNet> {
+    cfg: AgentConfig,
+    device: Device,
+    plain: Device,
+    actor: A,
+    critic: C,
+    target: C,
+    actor_opt: Adam,
+    critic_opt: Adam,
+    log_alpha: f64,
+    alpha_opt: ScalarAdam,
+    rng: ChaCha8Rng,
+    updates: u64,
+    inference: Option<A>,
+}
+
+/// Builds a network family.
+pub type Builder<T> = fn(&NetConfig, &Init, &Device) -> Result<T, equiarm_nn::nets::NetError>;
+
+impl<A: ActorNet, C: CriticNet> Sac<A, C> {
+    /// A fresh agent: weights from `Init::new(seed)`, noise RNG from `seed`.
+    pub fn build(cfg: AgentConfig, seed: u64, actor: Builder<A>, critic: Builder<C>) -> Result<Self, AgentError> {
+        let plain = Device::flex();
+        let device = plain.clone().autodiff();
+        let net = cfg.net_config();
+        let init = Init::new(seed);
+        let model = cfg.model.name();
+        let actor = actor(&net, &init, &device).map_err(|source| AgentError::Net { model, source })?;
+        let critic = critic(&net, &init, &device).map_err(|source| AgentError::Net { model, source })?;
+        let target = critic.valid();
+        let adam = AdamParams::new(cfg.lr);
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        rng.set_stream(0x5ac);
+        Ok(Sac {
+            log_alpha: cfg.init_alpha.ln(),
+            cfg,
+            device,
+            plain,
+            actor,
+            critic,
+            target,
+            actor_opt: Adam::new(adam),
+            critic_opt: Adam::new(adam),
+            alpha_opt: ScalarAdam::new(adam),
+            rng,
+            updates: 0,
+            inference: None,
+        })
+    }
+
+    /// Configuration.
+    pub fn config(&self) -> &AgentConfig {
+        &self.cfg
+    }
+
+    /// Updates made.
+    pub fn updates(&self) -> u64 {
+        self.updates
+    }
+
+    /// Current α.
+    pub fn alpha(&self) -> f64 {
+        self.log_alpha.exp()
+    }
+
+    fn normal(&mut self, n: usize) -> Vec<f32> {
+        crate::rng::normals(&mut self.rng, n)
+    }
+
+    fn image(&self, data: &[f32], n: usize, s: usize, device: &Device) -> Tensor<4> {
+        Tensor::from_data(TensorData::new(data.to_vec(), [n, 5, s, s]), device)
+    }
+
+    /// Actions `[n, 5]` (normalised, in [−1, 1]) for `n` observations `[n, 5, s, s]`; `noise` is
+    /// used in `Sample` mode (`[n, 5]` standard normals; drawn from the agent's RNG when `None`).
+    pub fn act(&mut self, obs: &[f32], n: usize, mode: ActMode, noise: Option<&[f32]>) -> Result<Vec<[f32; 5]>, AgentError> {
+        let s = self.cfg.input_size;
+        if obs.len() != n * 5 * s * s || n == 0 {
+            return Err(AgentError::Batch(format!("act: {} values for {n} observations of 5×{s}×{s}", obs.len())));
+        }
+        let eps = match (mode, noise) {
+            (ActMode::Greedy, _) => None,
+            (ActMode::Sample, Some(e)) if e.len() == n * 5 => Some(e.to_vec()),
+            (ActMode::Sample, Some(e)) => return Err(AgentError::Batch(format!("act: {} noise values for {n} actions", e.len()))),
+            (ActMode::Sample, None) => Some(self.normal(n * 5)),
+        };
+        if self.inference.is_none() {
+            self.inference = Some(self.actor.for_inference());
+        }
+        let plain = self.plain.clone();
+        let x = self.image(obs, n, s, &plain);
+        let actor = self.inference.as_ref().expect("set above");
+        let (mean, log_std) = actor.forward(x);
+        let a = match eps {
+            None => mean.tanh(),
+            Some(e) => gaussian_sample(mean, log_std, Tensor::from_data(TensorData::new(e, [n, 5]), &plain)).0,
+        };
+        let v = a.into_data().try_into_vec::<f32>().map_err(|e| AgentError::Batch(format!("act: {e:?}")))?;
+        Ok(v.chunks_exact(5).map(|c| [c[0], c[1], c[2], c[3], c[4]]).collect())
+    }
+
+    /// One SAC update (critic → actor → α → target). Returns the metrics and the TD error per
+    /// row (mean over the M copies), for PER priorities.
+    pub fn update(&mut self, batch: &Batch) -> Result<(Metrics, Vec<f32>), AgentError> {
+        batch.check()?;
+        let (b, s, m, k) = (batch.b, batch.s, batch.m, batch.k);
+        if s != self.cfg.input_size {
+            return Err(AgentError::Batch(format!("images are {s} px, the networks take {}", self.cfg.input_size)));
+        }
+        let dev = self.device.clone();
+        let plain = self.plain.clone();
+        let alpha = self.log_alpha.exp();
+        let gamma = self.cfg.gamma;
+        let col = |v: &[f32], rows: usize, d: &Device| Tensor::<2>::from_data(TensorData::new(v.to_vec(), [rows, 1]), d);
+        let repeat = |v: &[f32], times: usize| -> Vec<f32> { (0..times).flat_map(|_| v.iter().copied()).collect() };
+
+        // --- critic target (no gradients): mean over the K next-observation crops.
+        let next = self.image(&batch.next_obs, k * b, s, &plain);
+        let eps_next = self.normal(k * b * 5);
+        let actor_plain = self.actor.valid();
+        let (mn, ls) = actor_plain.forward(next.clone());
+        let (a_next, logp_next, _) = gaussian_sample(mn, ls, Tensor::from_data(TensorData::new(eps_next, [k * b, 5]), &plain));
+        let (q1t, q2t) = self.target.forward(next, a_next);
+        let reward = col(&repeat(&batch.reward, k), k * b, &plain);
+        let mask = col(&repeat(&batch.mask, k), k * b, &plain);
+        let y = critic_target(reward, mask, q1t, q2t, logp_next, alpha, gamma, k);
+        let y_m: Tensor<2> = Tensor::cat(vec![y; m], 0); // [m·b, 1]
+
+        // --- critic step on the M observation crops.
+        let obs = self.image(&batch.obs, m * b, s, &dev);
+        let action = Tensor::<2>::from_data(TensorData::new(repeat(&batch.action, m), [m * b, 5]), &dev);
+        let (q1, q2) = self.critic.forward(obs.clone(), action);
+        let y_ad = Tensor::from_inner(y_m.clone());
+        let d1 = q1.clone() - y_ad.clone();
+        let d2 = q2.clone() - y_ad;
+        let (l1, l2) = if self.cfg.use_is_weights {
+            let w = Tensor::from_inner(col(&repeat(&batch.weight, m), m * b, &plain));
+            ((d1.clone().powf_scalar(2.0) * w.clone()).mean(), (d2.clone().powf_scalar(2.0) * w).mean())
+        } else {
+            (d1.clone().powf_scalar(2.0).mean(), d2.clone().powf_scalar(2.0).mean())
+        };
+        let td_all = (d1.inner().abs() + d2.inner().abs()).mul_scalar(0.5); // [m·b, 1]
+        let td = td_all.reshape([m, b]).mean_dim(0).reshape([b]);
+        let qf1_values = scalar(q1.inner().mean());
+        let critic_loss = l1.clone() + l2.clone();
+        let (qf1_loss, qf2_loss) = (scalar(l1.inner()), scalar(l2.inner()));
+        let grads = GradientsParams::from_grads(critic_loss.backward(), &self.critic);
+        let critic = self.critic.clone();
+        self.critic = self.critic_opt.step(critic, grads);
+
+        // --- actor step (critic weights fixed) on the same M crops, expert L2 on the sampled action.
+        let eps = self.normal(m * b * 5);
+        let (mean, log_std) = self.actor.forward(obs.clone());
+        let (a, logp, _) = gaussian_sample(mean, log_std, Tensor::from_data(TensorData::new(eps, [m * b, 5]), &dev));
+        let frozen = self.critic.clone().no_grad();
+        let (q1a, q2a) = frozen.forward(obs, a.clone());
+        let mut actor_loss = (logp.clone().mul_scalar(alpha) - q1a.min_pair(q2a)).mean();
+        let n_expert = batch.expert.iter().filter(|&&e| e > 0.5).count();
+        let mut expert_loss = 0.0;
+        if n_expert > 0 && self.cfg.expert_weight != 0.0 {
+            let e = Tensor::from_inner(col(&repeat(&batch.expert, m), m * b, &plain));
+            let target_a = Tensor::<2>::from_data(TensorData::new(repeat(&batch.action, m), [m * b, 5]), &dev);
+            let se = (a - target_a).powf_scalar(2.0) * e;
+            let l = se.sum().div_scalar((m * n_expert * 5) as f64);
+            expert_loss = scalar(l.clone().inner());
+            actor_loss = actor_loss + l.mul_scalar(self.cfg.expert_weight);
+        }
+        let actor_loss_v = scalar(actor_loss.clone().inner());
+        let grads = GradientsParams::from_grads(actor_loss.backward(), &self.actor);
+        let actor = self.actor.clone();
+        self.actor = self.actor_opt.step(actor, grads);
+        self.inference = None;
+
+        // --- α step: d/d(log α) of −mean(log α · (log π + H̄)) = −mean(log π + H̄).
+        let mean_logp = scalar(logp.inner().mean()) as f64;
+        let g = -(mean_logp + self.cfg.target_entropy);
+        let alpha_loss = -(self.log_alpha * (mean_logp + self.cfg.target_entropy));
+        self.log_alpha = self.alpha_opt.step(self.log_alpha, g);
+
+        // --- target.
+        self.target = polyak(self.target.clone(), &self.critic, self.cfg.tau);
+        self.updates += 1;
+
+        let metrics = Metrics {
+            qf1_loss,
+            qf2_loss,
+            qf1_values,
+            actor_loss: actor_loss_v,
+            expert_loss,
+            alpha: self.log_alpha.exp() as f32,
+            alpha_loss: alpha_loss as f32,
+            entropy: -mean_logp as f32,
+        };
+        for (what, v) in [("critic loss", qf1_loss + qf2_loss), ("actor loss", actor_loss_v), ("alpha", metrics.alpha)] {
+            if !v.is_finite() {
+                return Err(AgentError::NonFinite { update: self.updates, what, value: v });
+            }
+        }
+        let td = td.into_data().try_into_vec::<f32>().map_err(|e| AgentError::Batch(format!("td: {e:?}")))?;
+        Ok((metrics, td))
+    }
+
+    /// The actor (for broadcasting weights).
+    pub fn actor(&self) -> &A {
+        &self.actor
+    }
+
+    /// Replace the actor's weights with those in a safetensors file (policy nodes).
+    pub fn load_actor(&mut self, path: &Path) -> Result<(), AgentError> {
+        let actor = self.actor.clone();
+        self.actor = equiarm_nn::checkpoint::load(actor, path)?;
+        self.inference = None;
+        Ok(())
+    }
+
+    /// Save the actor's weights alone.
+    pub fn save_actor(&self, path: &Path) -> Result<(), AgentError> {
+        Ok(equiarm_nn::checkpoint::save(&self.actor, path)?)
+    }
+
+    /// Save weights, optimiser state and scalar state into directory `dir` (which must exist):
+    /// `actor.safetensors`, `critic.safetensors`, `critic_target.safetensors`,
+    /// `actor_optim.safetensors`, `critic_optim.safetensors`, `agent.json`.
+    pub fn save(&self, dir: &Path) -> Result<(), AgentError> {
+        equiarm_nn::checkpoint::save(&self.actor, &dir.join("actor.safetensors"))?;
+        equiarm_nn::checkpoint::save(&self.critic, &dir.join("critic.safetensors"))?;
+        equiarm_nn::checkpoint::save(&self.target, &dir.join("critic_target.safetensors"))?;
+        self.actor_opt.save(&dir.join("actor_optim.safetensors"))?;
+        self.critic_opt.save(&dir.join("critic_optim.safetensors"))?;
+        let state = AgentState {
+            updates: self.updates,
+            log_alpha_bits: self.log_alpha.to_bits(),
+            alpha_adam: (self.alpha_opt.step, self.alpha_opt.m.to_bits(), self.alpha_opt.v.to_bits()),
+            rng: crate::rng::save_state(&self.rng),
+        };
+        let path = dir.join("agent.json");
+        let text = serde_json::to_string_pretty(&state).map_err(|e| AgentError::State { path: path.clone(), message: e.to_string() })?;
+        std::fs::write(&path, text).map_err(|e| AgentError::State { path, message: e.to_string() })
+    }
+
+    /// Restore everything [`Sac::save`] wrote (the agent must have been built with the same config).
+    pub fn load(&mut self, dir: &Path) -> Result<(), AgentError> {
+        let path = dir.join("agent.json");
+        let text = std::fs::read_to_string(&path).map_err(|e| AgentError::State { path: path.clone(), message: e.to_string() })?;
+        let state: AgentState = serde_json::from_str(&text).map_err(|e| AgentError::State { path: path.clone(), message: e.to_string() })?;
+        let rng = crate::rng::load_state(&state.rng).map_err(|message| AgentError::State { path: path.clone(), message })?;
+        let actor = equiarm_nn::checkpoint::load(self.actor.clone(), &dir.join("actor.safetensors"))?;
+        let critic = equiarm_nn::checkpoint::load(self.critic.clone(), &dir.join("critic.safetensors"))?;
+        let target = equiarm_nn::checkpoint::load(self.target.clone(), &dir.join("critic_target.safetensors"))?;
+        let adam = AdamParams::new(self.cfg.lr);
+        let actor_opt = Adam::load(adam, &actor, &dir.join("actor_optim.safetensors"), &self.plain)?;
+        let critic_opt = Adam::load(adam, &critic, &dir.join("critic_optim.safetensors"), &self.plain)?;
+        self.actor = actor;
+        self.critic = critic;
+        self.target = target;
+        self.actor_opt = actor_opt;
+        self.critic_opt = critic_opt;
+        self.log_alpha = f64::from_bits(state.log_alpha_bits);
+        let (st, m, v) = state.alpha_adam;
+        self.alpha_opt = ScalarAdam::with_state(adam, st, f64::from_bits(m), f64::from_bits(v));
+        self.rng = rng;
+        self.updates = state.updates;
+        self.inference = None;
+        Ok(())
+    }
+}
+
+/// The SAC critic target `y = r + γ·mask·(min(Q1′, Q2′) − α·log π′)` for `k` stacked copies of `b`
+/// rows (`[k·b, 1]` inputs, copy `j` of row `i` at `j·b + i`), averaged over the copies (DrQ's K;
+/// `k = 1` for RAD): `[b, 1]`.
+#[allow(clippy::too_many_arguments)]
+pub fn critic_target(reward: Tensor<2>, mask: Tensor<2>, q1: Tensor<2>, q2: Tensor<2>, logp: Tensor<2>, alpha: f64, gamma: f64, k: usize) -> Tensor<2> {
+    let [kb, _] = reward.dims();
+    let b = kb / k.max(1);
+    let y = reward + mask.mul_scalar(gamma) * (q1.min_pair(q2) - logp.mul_scalar(alpha));
+    y.reshape([k, b]).mean_dim(0).reshape([b, 1])
+}
+
+fn scalar(t: Tensor<1>) -> f32 {
+    t.into_data().convert::<f32>().try_into_vec::<f32>().ok().and_then(|v| v.first().copied()).unwrap_or(f32::NAN)
+}
+
+/// A SAC agent of any [`ModelKind`].
+pub enum Agent {
+    /// Equivariant (D4).
+    Equi(Sac<EquiActor, EquiCritic>),
+    /// CNN.
+    Cnn(Sac<CnnActor, CnnCritic>),
+    /// SEN.
+    Sen(Sac<SenActor, SenCritic>),
+}
+
+macro_rules! each {
+    ($self:expr, $a:ident => $e:expr) => {
+        match $self {
+            Agent::Equi($a) => $e,
+            Agent::Cnn($a) => $e,
+            Agent::Sen($a) => $e,
+        }
+    };
+}
+
+impl Agent {
+    /// A fresh agent of `cfg.model`, weights and noise seeded with `seed`.
+    pub fn new(cfg: AgentConfig, seed: u64) -> Result<Self, AgentError> {
+        Ok(match cfg.model {
+            ModelKind::Equi => Agent::Equi(Sac::build(cfg, seed, EquiActor::new, EquiCritic::new)?),
+            ModelKind::Cnn => Agent::Cnn(Sac::build(cfg, seed, CnnActor::new, CnnCritic::new)?),
+            ModelKind::Sen => Agent::Sen(Sac::build(cfg, seed, SenActor::new, SenCritic::new)?),
+        })
+    }
+
+    /// Configuration.
+    pub fn config(&self) -> &AgentConfig {
+        each!(self, a => a.config())
+    }
+
+    /// Updates made.
+    pub fn updates(&self) -> u64 {
+        each!(self, a => a.updates())
+    }
+
+    /// Current α.
+    pub fn alpha(&self) -> f64 {
+        each!(self, a => a.alpha())
+    }
+
+    /// See [`Sac::act`].
+    pub fn act(&mut self, obs: &[f32], n: usize, mode: ActMode, noise: Option<&[f32]>) -> Result<Vec<[f32; 5]>, AgentError> {
+        each!(self, a => a.act(obs, n, mode, noise))
+    }
+
+    /// See [`Sac::update`].
+    pub fn update(&mut self, batch: &Batch) -> Result<(Metrics, Vec<f32>), AgentError> {
+        each!(self, a => a.update(batch))
+    }
+
+    /// See [`Sac::save`].
+    pub fn save(&self, dir: &Path) -> Result<(), AgentError> {
+        each!(self, a => a.save(dir))
+    }
+
+    /// See [`Sac::load`].
+    pub fn load(&mut self, dir: &Path) -> Result<(), AgentError> {
+        each!(self, a => a.load(dir))
+    }
+
+    /// See [`Sac::save_actor`].
+    pub fn save_actor(&self, path: &Path) -> Result<(), AgentError> {
+        each!(self, a => a.save_actor(path))
+    }
+
+    /// See [`Sac::load_actor`].
+    pub fn load_actor(&mut self, path: &Path) -> Result<(), AgentError> {
+        each!(self, a => a.load_actor(path))
+    }
+
+    /// The actor's weights as safetensors bytes (what `PolicyWeights.data` carries).
+    pub fn actor_bytes(&self, scratch: &Path) -> Result<Vec<u8>, AgentError> {
+        self.save_actor(scratch)?;
+        std::fs::read(scratch).map_err(|e| AgentError::State { path: scratch.into(), message: e.to_string() })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn t2(v: &[f32], rows: usize, cols: usize) -> Tensor<2> {
+        Tensor::from_data(TensorData::new(v.to_vec(), [rows, cols]), &Device::flex())
+    }
+
+    fn vals(t: Tensor<2>) -> Vec<f32> {
+        t.into_data().try_into_vec::<f32>().unwrap()
+    }
+
+    /// erf by Abramowitz–Stegun 7.1.26 (|error| < 1.5e-7).
+    fn erf(x: f64) -> f64 {
+        let s = x.signum();
+        let x = x.abs();
+        let t = 1.0 / (1.0 + 0.3275911 * x);
+        let y = 1.0 - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t + 0.254829592) * t * (-x * x).exp();
+        s * y
+    }
+
+    fn phi(z: f64) -> f64 {
+        0.5 * (1.0 + erf(z / std::f64::consts::SQRT_2))
+    }
+
+    #[test]
+    fn log_prob_matches_the_numerical_density_of_the_squashed_gaussian() {
+        let mean = [0.3f32, -1.2, 0.0, 2.0, -0.4];
+        let log_std = [-0.5f32, 0.2, -1.5, -0.1, 0.4];
+        let eps = [0.7f32, -0.3, 1.1, -0.9, 0.05];
+        let (a, logp, greedy) = gaussian_sample(t2(&mean, 1, 5), t2(&log_std, 1, 5), t2(&eps, 1, 5));
+        let a = vals(a);
+        let logp = vals(logp)[0] as f64;
+        // Density of a = tanh(x), x ~ N(μ, σ²), per dimension: P(a ∈ [a−h, a+h]) / 2h from the
+        // Gaussian CDF at atanh of the interval ends; independent dimensions multiply.
+        let mut log_numeric = 0.0;
+        for i in 0..5 {
+            let (mu, sd, ai) = (mean[i] as f64, (log_std[i] as f64).exp(), a[i] as f64);
+            let h = 1e-5 * (1.0 - ai * ai);
+            let p = phi(((ai + h).atanh() - mu) / sd) - phi(((ai - h).atanh() - mu) / sd);
+            log_numeric += (p / (2.0 * h)).ln();
+        }
+        assert!((logp - log_numeric).abs() < 2e-3, "log π {logp} vs numerical {log_numeric}");
+        let g = vals(greedy);
+        for i in 0..5 {
+            assert!((g[i] - mean[i].tanh()).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn critic_target_on_a_hand_made_batch() {
+        // Two rows, two copies (DrQ K = 2): y = r + γ·mask·(min(q1, q2) − α·logp), mean over copies.
+        let r = t2(&[1.0, 0.0, 1.0, 0.0], 4, 1);
+        let mask = t2(&[0.0, 1.0, 0.0, 1.0], 4, 1);
+        let q1 = t2(&[5.0, 2.0, 7.0, 4.0], 4, 1);
+        let q2 = t2(&[6.0, 3.0, 1.0, 3.0], 4, 1);
+        let logp = t2(&[-1.0, -2.0, -3.0, 1.0], 4, 1);
+        let y = vals(critic_target(r, mask, q1, q2, logp, 0.1, 0.9, 2));
+        // row 0: terminal, both copies give 1.0.
+        // row 1: copy 0: 0.9·(2 + 0.2) = 1.98; copy 1: 0.9·(3 − 0.1) = 2.61; mean 2.295.
+        assert!((y[0] - 1.0).abs() < 1e-6 && (y[1] - 2.295).abs() < 1e-5, "{y:?}");
+        let y1 = vals(critic_target(t2(&[0.5], 1, 1), t2(&[1.0], 1, 1), t2(&[2.0], 1, 1), t2(&[1.5], 1, 1), t2(&[-5.0], 1, 1), 0.01, 0.99, 1));
+        assert!((y1[0] - (0.5 + 0.99 * (1.5 + 0.05))).abs() < 1e-6, "{y1:?}");
+    }
+
+    fn tiny(model: ModelKind) -> AgentConfig {
+        AgentConfig { model, hidden: 8, input_size: 8, ..AgentConfig::default() }
+    }
+
+    fn batch(b: usize, s: usize, seed: u64) -> Batch {
+        let mut rng = crate::rng::stream(seed, 9);
+        Batch {
+            b,
+            s,
+            m: 1,
+            k: 1,
+            obs: crate::rng::normals(&mut rng, b * 5 * s * s),
+            next_obs: crate::rng::normals(&mut rng, b * 5 * s * s),
+            action: crate::rng::normals(&mut rng, b * 5).iter().map(|x| x.tanh()).collect(),
+            reward: (0..b).map(|i| (i % 2) as f32).collect(),
+            mask: vec![1.0; b],
+            expert: (0..b).map(|i| (i % 3 == 0) as u8 as f32).collect(),
+            weight: vec![1.0; b],
+        }
+    }
+
+    #[test]
+    fn updates_learn_a_fixed_batch_and_are_repeatable() {
+        for model in [ModelKind::Equi, ModelKind::Cnn, ModelKind::Sen] {
+            let data = batch(8, 8, 1);
+            let mut a = Agent::new(tiny(model), 3).unwrap();
+            let mut b = Agent::new(tiny(model), 3).unwrap();
+            let first = a.update(&data).unwrap().0;
+            let mut last = first;
+            for _ in 0..30 {
+                last = a.update(&data).unwrap().0;
+            }
+            assert!(last.qf1_loss < first.qf1_loss, "{model:?}: critic loss {} → {}", first.qf1_loss, last.qf1_loss);
+            assert!(last.expert_loss < first.expert_loss, "{model:?}: expert loss {} → {}", first.expert_loss, last.expert_loss);
+            for _ in 0..31 {
+                b.update(&data).unwrap();
+            }
+            let x = &data.obs[..5 * 64];
+            assert_eq!(a.act(x, 1, ActMode::Greedy, None).unwrap(), b.act(x, 1, ActMode::Greedy, None).unwrap());
+        }
+    }
+
+    #[test]
+    fn bad_batches_are_errors() {
+        let mut a = Agent::new(tiny(ModelKind::Cnn), 0).unwrap();
+        let mut data = batch(4, 8, 0);
+        data.reward.pop();
+        assert!(matches!(a.update(&data), Err(AgentError::Batch(_))));
+        let data = batch(4, 16, 0);
+        assert!(matches!(a.update(&data), Err(AgentError::Batch(_))));
+        assert!(a.act(&[0.0; 7], 1, ActMode::Greedy, None).is_err());
+    }
+
+    #[test]
+    fn save_load_continues_bit_identically() {
+        let dir = std::env::temp_dir().join(format!("equiarm-sac-agent-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let batches: Vec<Batch> = (0..6).map(|i| batch(6, 8, 10 + i)).collect();
+        let mut straight = Agent::new(tiny(ModelKind::Equi), 5).unwrap();
+        for b in &batches {
+            straight.update(b).unwrap();
+        }
+        let mut first = Agent::new(tiny(ModelKind::Equi), 5).unwrap();
+        for b in &batches[..3] {
+            first.update(b).unwrap();
+        }
+        first.save(&dir).unwrap();
+        drop(first);
+        let mut resumed = Agent::new(tiny(ModelKind::Equi), 99).unwrap();
+        resumed.load(&dir).unwrap();
+        for b in &batches[3..] {
+            resumed.update(b).unwrap();
+        }
+        let (p1, p2) = (dir.join("a.safetensors"), dir.join("b.safetensors"));
+        straight.save_actor(&p1).unwrap();
+        resumed.save_actor(&p2).unwrap();
+        // Compare tensors, not bytes: the safetensors header order is not fixed.
+        let read = |p: &Path| {
+            let mut t = crate::tensorfile::read(p).unwrap().tensors;
+            t.sort_by(|a, b| a.0.cmp(&b.0));
+            t
+        };
+        let (ta, tb) = (read(&p1), read(&p2));
+        assert!(!ta.is_empty() && ta == tb, "resumed actor differs from the straight one");
+        assert_eq!(straight.alpha(), resumed.alpha());
+        // A checkpoint of another architecture is refused, naming the file.
+        let mut cnn = Agent::new(tiny(ModelKind::Cnn), 0).unwrap();
+        let e = cnn.load(&dir).unwrap_err().to_string();
+        assert!(e.contains("actor.safetensors"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
