@@ -2,4 +2,5 @@
 //!
 //! Limitations: FERM (CURL) is not implemented yet.
 
+pub mod metrics;
 pub mod plot;
