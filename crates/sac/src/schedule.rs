@@ -38,7 +38,7 @@ impl Every {
     /// Whether `step` (the number of steps completed) is a positive multiple of `n`. Step 0 is not
     /// due: a caller who wants an evaluation before training does it explicitly.
     pub fn is_due(&self, step: u64) -> bool {
-        self.0 != 0 && step != 0 && step % self.0 == 0
+        self.0 != 0 && step != 0 && step.is_multiple_of(self.0)
     }
 }
 
@@ -48,13 +48,29 @@ mod tests {
 
     #[test]
     fn linear_interpolates_then_clamps() {
-        let beta = Linear { start: 0.4, end: 1.0, steps: 5000 };
+        let beta = Linear {
+            start: 0.4,
+            end: 1.0,
+            steps: 5000,
+        };
         assert_eq!(beta.value(0), 0.4);
         assert!((beta.value(2500) - 0.7).abs() < 1e-12);
         assert_eq!(beta.value(5000), 1.0);
         assert_eq!(beta.value(1_000_000), 1.0);
-        assert_eq!(Linear { start: 0.4, end: 1.0, steps: 0 }.value(0), 1.0);
-        let down = Linear { start: 1.0, end: 0.0, steps: 4 };
+        assert_eq!(
+            Linear {
+                start: 0.4,
+                end: 1.0,
+                steps: 0
+            }
+            .value(0),
+            1.0
+        );
+        let down = Linear {
+            start: 1.0,
+            end: 0.0,
+            steps: 4,
+        };
         assert_eq!(down.value(1), 0.75);
     }
 
