@@ -1,0 +1,340 @@
+//! The learner: agent + prioritised replay + crops + checkpoints, fed transitions by whoever runs
+//! the environments (the in-process loop of [`crate::train`] or the DDS trainer node).
+//!
+//! A checkpoint is a directory with the agent's files (see [`crate::agent::Sac::save`]),
+//! `replay.bin.zst`, `learner.json` (counters and RNG position) and `manifest.json` (config,
+//! versions, counters). [`Learner::resume`] refuses a manifest whose config differs from the run's
+//! (other than `total_updates`, which may be extended), naming the first differing field.
+//!
+//! Limitations: frames must all have the configured `image_size`.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+use crate::agent::{ActMode, Agent, AgentError, Batch, Metrics};
+use crate::augment::{center_offset, network_input, random_offset};
+use crate::config::{Augmentation, TrainConfig};
+use crate::frame::Frame;
+use crate::replay::{Replay, Stored};
+use crate::schedule::Linear;
+
+/// Version of the checkpoint layout written by this crate.
+pub const CHECKPOINT_FORMAT: u32 = 1;
+
+/// Learner errors.
+#[derive(Debug, Error)]
+pub enum LearnerError {
+    /// The agent failed.
+    #[error(transparent)]
+    Agent(#[from] AgentError),
+    /// The replay buffer failed.
+    #[error(transparent)]
+    Replay(#[from] crate::replay::ReplayError),
+    /// Building network input failed.
+    #[error(transparent)]
+    Augment(#[from] crate::augment::AugmentError),
+    /// The configuration is invalid.
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    /// A checkpoint is missing, unreadable or made by another run.
+    #[error("checkpoint {path}: {message}")]
+    Checkpoint {
+        /// Directory or file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// What `manifest.json` records.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Manifest {
+    /// [`CHECKPOINT_FORMAT`].
+    pub format: u32,
+    /// equiarm version that wrote it.
+    pub equiarm_version: String,
+    /// Tensor library.
+    pub burn_version: String,
+    /// Network family name (`equi`, `cnn`, `sen`).
+    pub model: String,
+    /// The run's full config.
+    pub config: TrainConfig,
+    /// Gradient updates made.
+    pub updates: u64,
+    /// Transitions received.
+    pub transitions: u64,
+    /// Transitions in the replay.
+    pub replay_len: usize,
+    /// Expert transitions in the replay.
+    pub expert_len: usize,
+}
+
+/// Counters and RNG position (`learner.json`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LearnerState {
+    updates: u64,
+    transitions: u64,
+    rng: (String, u64, String),
+}
+
+/// Agent + replay + the sampling RNG.
+pub struct Learner {
+    cfg: TrainConfig,
+    agent: Agent,
+    replay: Replay,
+    rng: ChaCha8Rng,
+    beta: Linear,
+    transitions: u64,
+    last: Option<Metrics>,
+}
+
+impl Learner {
+    /// A fresh learner for `cfg` (validated here).
+    pub fn new(cfg: TrainConfig) -> Result<Self, LearnerError> {
+        cfg.validate()?;
+        let agent = Agent::new(cfg.agent.clone(), cfg.seed)?;
+        let replay = Replay::new(cfg.replay.clone())?;
+        let beta = Linear { start: cfg.replay.beta_start, end: cfg.replay.beta_end, steps: cfg.total_updates };
+        Ok(Learner { rng: crate::rng::stream(cfg.seed, 0x7265_706c), cfg, agent, replay, beta, transitions: 0, last: None })
+    }
+
+    /// The config.
+    pub fn config(&self) -> &TrainConfig {
+        &self.cfg
+    }
+
+    /// The agent.
+    pub fn agent(&self) -> &Agent {
+        &self.agent
+    }
+
+    /// The agent, mutably (acting).
+    pub fn agent_mut(&mut self) -> &mut Agent {
+        &mut self.agent
+    }
+
+    /// The replay buffer.
+    pub fn replay(&self) -> &Replay {
+        &self.replay
+    }
+
+    /// Updates made.
+    pub fn updates(&self) -> u64 {
+        self.agent.updates()
+    }
+
+    /// Transitions received.
+    pub fn transitions(&self) -> u64 {
+        self.transitions
+    }
+
+    /// Metrics of the last update.
+    pub fn last_metrics(&self) -> Option<Metrics> {
+        self.last
+    }
+
+    /// Store one transition (new transitions get the maximal priority).
+    pub fn push(&mut self, t: Stored) -> Result<(), LearnerError> {
+        self.replay.push(t)?;
+        self.transitions += 1;
+        Ok(())
+    }
+
+    /// True when the replay holds enough transitions to update (`training_starts`).
+    pub fn ready(&self) -> bool {
+        self.replay.len() >= self.cfg.training_starts.max(1)
+    }
+
+    /// Actions for `frames` with a centre crop (acting and evaluation, PAPER_SPEC §1.1).
+    pub fn act(&mut self, frames: &[&Frame], mode: ActMode) -> Result<Vec<[f32; 5]>, LearnerError> {
+        act_on(&mut self.agent, frames, self.cfg.agent.input_size, mode)
+    }
+
+    /// Sample a batch, crop it, update the agent and the priorities.
+    pub fn update(&mut self) -> Result<Metrics, LearnerError> {
+        let beta = self.beta.value(self.agent.updates());
+        let sample = self.replay.sample(self.cfg.batch_size, beta, &mut self.rng)?;
+        let batch = self.build_batch(&sample.slots, &sample.weights)?;
+        let (metrics, td) = self.agent.update(&batch)?;
+        self.replay.update_priorities(&sample.slots, &td)?;
+        self.last = Some(metrics);
+        Ok(metrics)
+    }
+
+    /// The cropped batch for replay `slots` (RAD: one offset per transition shared by obs and
+    /// next_obs; DrQ: independent offsets per copy; centre: no randomness).
+    pub fn build_batch(&mut self, slots: &[usize], weights: &[f32]) -> Result<Batch, LearnerError> {
+        let s = self.cfg.agent.input_size;
+        let size = self.cfg.image_size;
+        let rows: Vec<&Stored> = slots
+            .iter()
+            .map(|&i| self.replay.get(i).ok_or_else(|| LearnerError::Checkpoint { path: PathBuf::new(), message: format!("replay slot {i} is empty") }))
+            .collect::<Result<_, _>>()?;
+        let b = rows.len();
+        let (k, m) = match self.cfg.augmentation {
+            Augmentation::Drq { k, m } => (k, m),
+            _ => (1, 1),
+        };
+        let mut obs_frames = Vec::with_capacity(m * b);
+        let mut obs_off = Vec::with_capacity(m * b);
+        let mut next_frames = Vec::with_capacity(k * b);
+        let mut next_off = Vec::with_capacity(k * b);
+        match self.cfg.augmentation {
+            Augmentation::Rad => {
+                for r in &rows {
+                    let o = random_offset(&mut self.rng, size, s);
+                    obs_frames.push(&*r.obs);
+                    obs_off.push(o);
+                    next_frames.push(&*r.next_obs);
+                    next_off.push(o);
+                }
+            }
+            Augmentation::Center => {
+                let c = center_offset(size, s);
+                for r in &rows {
+                    obs_frames.push(&*r.obs);
+                    obs_off.push((c, c));
+                    next_frames.push(&*r.next_obs);
+                    next_off.push((c, c));
+                }
+            }
+            Augmentation::Drq { .. } => {
+                for _ in 0..m {
+                    for r in &rows {
+                        obs_frames.push(&*r.obs);
+                        obs_off.push(random_offset(&mut self.rng, size, s));
+                    }
+                }
+                for _ in 0..k {
+                    for r in &rows {
+                        next_frames.push(&*r.next_obs);
+                        next_off.push(random_offset(&mut self.rng, size, s));
+                    }
+                }
+            }
+        }
+        Ok(Batch {
+            b,
+            s,
+            m,
+            k,
+            obs: network_input(&obs_frames, &obs_off, s)?,
+            next_obs: network_input(&next_frames, &next_off, s)?,
+            action: rows.iter().flat_map(|r| r.action).collect(),
+            reward: rows.iter().map(|r| r.reward).collect(),
+            mask: rows.iter().map(|r| if r.done { 0.0 } else { 1.0 }).collect(),
+            expert: rows.iter().map(|r| if r.expert { 1.0 } else { 0.0 }).collect(),
+            weight: weights.to_vec(),
+        })
+    }
+
+    /// Write a checkpoint into `dir` (created; an existing one is replaced file by file).
+    pub fn save(&self, dir: &Path) -> Result<(), LearnerError> {
+        let ck = |message: String| LearnerError::Checkpoint { path: dir.into(), message };
+        std::fs::create_dir_all(dir).map_err(|e| ck(e.to_string()))?;
+        self.agent.save(dir)?;
+        self.replay.save(&dir.join("replay.bin.zst"))?;
+        let state = LearnerState { updates: self.agent.updates(), transitions: self.transitions, rng: crate::rng::save_state(&self.rng) };
+        write_json(&dir.join("learner.json"), &state).map_err(ck)?;
+        let manifest = Manifest {
+            format: CHECKPOINT_FORMAT,
+            equiarm_version: env!("CARGO_PKG_VERSION").into(),
+            burn_version: "0.22.1".into(),
+            model: self.cfg.agent.model.name().into(),
+            config: self.cfg.clone(),
+            updates: self.agent.updates(),
+            transitions: self.transitions,
+            replay_len: self.replay.len(),
+            expert_len: self.replay.expert_len(),
+        };
+        write_json(&dir.join("manifest.json"), &manifest).map_err(ck)
+    }
+
+    /// Restore a checkpoint written by [`Learner::save`] into this learner (built with the same
+    /// config, except possibly `total_updates`).
+    pub fn resume(&mut self, dir: &Path) -> Result<(), LearnerError> {
+        let manifest = read_manifest(dir)?;
+        let mut theirs = manifest.config.clone();
+        theirs.total_updates = self.cfg.total_updates;
+        if theirs != self.cfg {
+            let a = serde_json::to_value(&theirs).unwrap_or_default();
+            let b = serde_json::to_value(&self.cfg).unwrap_or_default();
+            let field = first_difference(&a, &b, "");
+            return Err(LearnerError::Checkpoint {
+                path: dir.into(),
+                message: format!("made with another config (first difference: `{field}`); resume with the checkpoint's config or start a new run"),
+            });
+        }
+        let ck = |message: String| LearnerError::Checkpoint { path: dir.into(), message };
+        let state: LearnerState = read_json(&dir.join("learner.json")).map_err(ck)?;
+        self.agent.load(dir)?;
+        self.replay = Replay::load(&dir.join("replay.bin.zst"))?;
+        self.rng = crate::rng::load_state(&state.rng).map_err(ck)?;
+        self.transitions = state.transitions;
+        if state.updates != self.agent.updates() {
+            return Err(LearnerError::Checkpoint { path: dir.into(), message: format!("learner.json says {} updates, agent.json {}", state.updates, self.agent.updates()) });
+        }
+        Ok(())
+    }
+}
+
+/// Centre-cropped greedy/sampled actions of `agent` for `frames`.
+pub fn act_on(agent: &mut Agent, frames: &[&Frame], s: usize, mode: ActMode) -> Result<Vec<[f32; 5]>, LearnerError> {
+    let offs: Vec<(usize, usize)> = frames
+        .iter()
+        .map(|f| {
+            let c = center_offset(f.size(), s);
+            (c, c)
+        })
+        .collect();
+    let x = network_input(frames, &offs, s)?;
+    Ok(agent.act(&x, frames.len(), mode, None)?)
+}
+
+/// Read `manifest.json` of a checkpoint directory.
+pub fn read_manifest(dir: &Path) -> Result<Manifest, LearnerError> {
+    let m: Manifest = read_json(&dir.join("manifest.json")).map_err(|message| LearnerError::Checkpoint { path: dir.into(), message })?;
+    if m.format != CHECKPOINT_FORMAT {
+        return Err(LearnerError::Checkpoint { path: dir.into(), message: format!("checkpoint format {} (this build reads {CHECKPOINT_FORMAT})", m.format) });
+    }
+    Ok(m)
+}
+
+/// Serialise `v` to `path` as pretty JSON through a temporary file.
+pub fn write_json<T: Serialize>(path: &Path, v: &T) -> Result<(), String> {
+    let text = serde_json::to_string_pretty(v).map_err(|e| e.to_string())?;
+    let tmp = path.with_extension("json.tmp");
+    std::fs::write(&tmp, text).map_err(|e| format!("{}: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Read JSON from `path`, errors naming the file.
+pub fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+fn first_difference(a: &serde_json::Value, b: &serde_json::Value, prefix: &str) -> String {
+    match (a, b) {
+        (serde_json::Value::Object(x), serde_json::Value::Object(y)) => {
+            for (k, va) in x {
+                let p = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+                match y.get(k) {
+                    Some(vb) if vb == va => {}
+                    Some(vb) => return first_difference(va, vb, &p),
+                    None => return p,
+                }
+            }
+            prefix.to_string()
+        }
+        _ => prefix.to_string(),
+    }
+}
+
+/// Shared frame handle.
+pub type FrameRef = Arc<Frame>;
