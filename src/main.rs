@@ -36,6 +36,12 @@ enum Command {
     /// Bags: describe, evaluate, repair.
     #[command(subcommand)]
     Bag(BagCommand),
+    /// Trains SAC from demonstrations (PAPER_SPEC §2): in this process (`--in-process`), or as the
+    /// trainer node over DDS (transitions from /transitions, weights out on /policy/weights).
+    ///
+    /// Writes metrics.csv/jsonl (CleanRL names), learning_curve.png, checkpoints/ and config.json into
+    /// --run-dir; prints an evaluation table at the end. Ctrl-C stops with a checkpoint; --resume continues.
+    Train(equiarm_nodes::train_cli::TrainArgs),
     /// Networks: diagnostics of saved (or freshly initialised) equivariant networks.
     #[command(subcommand)]
     Nn(NnCommand),
@@ -380,6 +386,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             for f in equiarm_nodes::sim::snapshot(&task, seed, steps, view.as_deref(), &out)? {
                 println!("{}", f.display());
             }
+        }
+        Command::Train(args) => {
+            let cfg = args.build_config()?;
+            if args.print_config {
+                println!("{}", serde_json::to_string_pretty(&cfg)?);
+                return Ok(());
+            }
+            if !args.in_process {
+                bail!("the trainer node over DDS is not available in this build yet: use --in-process");
+            }
+            let summary = equiarm_nodes::train_cli::run_in_process(&args, cfg)?;
+            equiarm_nodes::train_cli::print_summary(&summary);
         }
         Command::Sim(SimCommand { sub: None, args }) => {
             let opts = RosOptions::from_env()?;

@@ -12,3 +12,4 @@ pub mod bag_tools;
 pub mod player;
 pub mod sim;
 pub mod policy_eval;
+pub mod train_cli;

@@ -1,0 +1,193 @@
+//! `equiarm train`: the options shared by the in-process loop (`--in-process`) and the trainer node
+//! over DDS, turned into one validated [`TrainConfig`], and the in-process runner.
+//!
+//! The config is built in this order: the preset (`--preset reduced|paper`, for `--task`), then a
+//! JSON file (`--config`, which replaces the preset), then the individual flags. `--print-config`
+//! shows the result without running.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use anyhow::{Context as _, bail};
+use equiarm_sac::agent::ModelKind;
+use equiarm_sac::config::{Augmentation, TrainConfig};
+use equiarm_sac::train::{RunOptions, RunSummary};
+
+/// Options of `equiarm train`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct TrainArgs {
+    /// Run the envs inside this process (no DDS): the transport-free loop.
+    #[arg(long)]
+    pub in_process: bool,
+    /// Preset: `reduced` (2-core CPU) or `paper` (PAPER_SPEC §2; meant for a GPU).
+    #[arg(long, default_value = "reduced")]
+    pub preset: String,
+    /// JSON config file (replaces the preset; flags below still override it).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Task (block_pulling, block_pushing, block_picking, drawer_opening, block_in_bowl).
+    #[arg(long)]
+    pub task: Option<String>,
+    /// Network family: equi, cnn or sen.
+    #[arg(long)]
+    pub model: Option<String>,
+    /// Base seed.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Gradient updates to train for.
+    #[arg(long)]
+    pub total_updates: Option<u64>,
+    /// Training envs (in-process) / expected sim+policy pairs (over DDS).
+    #[arg(long)]
+    pub num_envs: Option<usize>,
+    /// Evaluate every N updates (0: never).
+    #[arg(long)]
+    pub eval_every: Option<u64>,
+    /// Episodes per evaluation.
+    #[arg(long)]
+    pub eval_episodes: Option<usize>,
+    /// Successful expert episodes preloaded (in-process) / expected from expert pairs (over DDS).
+    #[arg(long)]
+    pub demo_episodes: Option<usize>,
+    /// Batch size.
+    #[arg(long)]
+    pub batch_size: Option<usize>,
+    /// Hidden size of the networks.
+    #[arg(long)]
+    pub hidden: Option<usize>,
+    /// Rendered frame size and network input size, as FRAME:INPUT (e.g. 76:64, 152:128).
+    #[arg(long)]
+    pub image: Option<String>,
+    /// Augmentation: rad, drq (K = M = 2) or center.
+    #[arg(long)]
+    pub augmentation: Option<String>,
+    /// Checkpoint every N updates.
+    #[arg(long)]
+    pub checkpoint_every: Option<u64>,
+    /// Run directory (metrics, learning curve, checkpoints, config).
+    #[arg(long, default_value = "runs/latest")]
+    pub run_dir: PathBuf,
+    /// Resume from a checkpoint directory, or from a run directory's latest checkpoint.
+    #[arg(long)]
+    pub resume: Option<PathBuf>,
+    /// Print the resulting config as JSON and exit.
+    #[arg(long)]
+    pub print_config: bool,
+    /// No progress line.
+    #[arg(long, short)]
+    pub quiet: bool,
+    /// Over DDS: publish the actor's weights on /policy/weights every N updates.
+    #[arg(long, default_value_t = 50)]
+    pub weights_every: u64,
+    /// Over DDS: namespace of the evaluation sim+policy pair (its episodes carry eval = true).
+    #[arg(long, default_value = "/eval")]
+    pub eval_namespace: String,
+    /// Over DDS: exit when no transition arrived for this many seconds after the first one.
+    #[arg(long, default_value_t = 60.0)]
+    pub idle_timeout_s: f64,
+}
+
+impl TrainArgs {
+    /// The validated config these options describe.
+    pub fn build_config(&self) -> anyhow::Result<TrainConfig> {
+        let task = self.task.clone().unwrap_or_else(|| "block_pulling".into());
+        let mut cfg = match &self.config {
+            Some(path) => {
+                let text = std::fs::read_to_string(path).with_context(|| format!("reading config {}", path.display()))?;
+                TrainConfig::from_json(&text).map_err(|e| anyhow::anyhow!("config {}: {e}", path.display()))?
+            }
+            None => TrainConfig::preset(&self.preset, &task)
+                .ok_or_else(|| anyhow::anyhow!("unknown --preset `{}`: use reduced or paper", self.preset))?,
+        };
+        if let Some(t) = &self.task {
+            if self.config.is_some() || t != &cfg.task {
+                cfg.task = t.clone();
+            }
+        }
+        if let Some(m) = &self.model {
+            cfg.agent.model = ModelKind::parse(m).ok_or_else(|| anyhow::anyhow!("unknown --model `{m}`: use equi, cnn or sen"))?;
+        }
+        macro_rules! set {
+            ($($flag:ident => $($field:ident).+),* $(,)?) => { $( if let Some(v) = self.$flag { cfg.$($field).+ = v; } )* };
+        }
+        set!(seed => seed, total_updates => total_updates, num_envs => num_envs, eval_every => eval_every,
+             eval_episodes => eval_episodes, demo_episodes => demo_episodes, batch_size => batch_size,
+             hidden => agent.hidden, checkpoint_every => checkpoint_every);
+        if let Some(img) = &self.image {
+            let (f, i) = img.split_once(':').ok_or_else(|| anyhow::anyhow!("--image `{img}`: expected FRAME:INPUT, e.g. 76:64"))?;
+            cfg.image_size = f.parse().with_context(|| format!("--image `{img}`: frame size"))?;
+            cfg.agent.input_size = i.parse().with_context(|| format!("--image `{img}`: input size"))?;
+        }
+        if let Some(a) = &self.augmentation {
+            cfg.augmentation = match a.as_str() {
+                "rad" => Augmentation::Rad,
+                "drq" => Augmentation::Drq { k: 2, m: 2 },
+                "center" => Augmentation::Center,
+                other => bail!("unknown --augmentation `{other}`: use rad, drq or center"),
+            };
+        }
+        cfg.validate()?;
+        Ok(cfg)
+    }
+}
+
+/// Run the in-process loop; Ctrl-C / SIGTERM stop it after the current step with a checkpoint.
+pub fn run_in_process(args: &TrainArgs, cfg: TrainConfig) -> anyhow::Result<RunSummary> {
+    let stop = stop_flag();
+    let resume = match &args.resume {
+        Some(p) => Some(equiarm_sac::train::find_checkpoint(p)?),
+        None => None,
+    };
+    let opts = RunOptions { run_dir: args.run_dir.clone(), resume, stop_at: None, progress: !args.quiet };
+    let flag = stop.clone();
+    let summary = equiarm_sac::train::run(cfg, &opts, &move || flag.load(Ordering::Relaxed))?;
+    Ok(summary)
+}
+
+/// Print the evaluation table of a run (one row per evaluation) and where its outputs are.
+pub fn print_summary(s: &RunSummary) {
+    println!("\n  updates   episodes   success rate   discounted return   mean length");
+    for e in &s.evals {
+        println!("  {:>7}   {:>8}   {:>12.2}   {:>17.3}   {:>11.1}", e.updates, e.episodes, e.success_rate, e.discounted_return, e.mean_length);
+    }
+    println!("\nrun directory   {}", s.run_dir.display());
+    println!("metrics         {}", s.run_dir.join("metrics.csv").display());
+    println!("learning curve  {}", s.run_dir.join("learning_curve.png").display());
+    if let Some(c) = &s.last_checkpoint {
+        println!("checkpoint      {}", c.display());
+    }
+    println!("updates {}, env steps {}, wall {:.0} s", s.updates, s.global_step, s.wall_s);
+}
+
+/// A flag that turns true on SIGINT or SIGTERM (a helper thread waits for the signal).
+pub fn stop_flag() -> Arc<AtomicBool> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let rt = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
+            Ok(rt) => rt,
+            Err(e) => {
+                log::warn!("no signal handler: {e}");
+                return;
+            }
+        };
+        rt.block_on(async {
+            use tokio::signal::unix::{SignalKind, signal};
+            let (Ok(mut term), Ok(mut int)) = (signal(SignalKind::terminate()), signal(SignalKind::interrupt())) else {
+                log::warn!("could not install the SIGINT/SIGTERM handlers");
+                return;
+            };
+            let _ = tx.send(());
+            let sig = tokio::select! {
+                _ = term.recv() => "SIGTERM",
+                _ = int.recv() => "SIGINT",
+            };
+            log::info!("{sig}: stopping after the current step and writing a checkpoint");
+            flag.store(true, Ordering::Relaxed);
+        });
+    });
+    let _ = rx.recv_timeout(std::time::Duration::from_secs(1));
+    stop
+}
