@@ -46,8 +46,14 @@ impl Node {
                 l.push('\n');
             }
         });
-        let mut out = child.stdout.take().unwrap();
-        std::thread::spawn(move || std::io::copy(&mut out, &mut std::io::sink()));
+        let (sink, out) = (log.clone(), child.stdout.take().unwrap());
+        std::thread::spawn(move || {
+            for line in BufReader::new(out).lines().map_while(Result::ok) {
+                let mut l = sink.lock().unwrap();
+                l.push_str(&line);
+                l.push('\n');
+            }
+        });
         Node { name: name.into(), child: Some(child), log }
     }
 
@@ -173,6 +179,49 @@ fn two_sim_policy_pairs_train_one_trainer_over_dds_without_losing_a_transition()
             assert!(log.contains("actor latency (batch 1, last 100): median"), "{log}");
         }
     }
+}
+
+#[test]
+fn an_expert_pair_feeds_successful_demos_and_the_trainer_stops_at_total_updates_and_resumes() {
+    const DOMAIN: u16 = 101;
+    let run_dir = support::scratch("learn_dds_expert");
+    let run = run_dir.to_str().unwrap();
+    let trainer_args = |total: &'static str| {
+        let mut a = vec!["train", "--run-dir", run, "--batch-size", "8", "--num-envs", "1", "--demo-episodes", "0", "--eval-every", "0"];
+        a.extend(["--weights-every", "2", "--training-starts", "8", "--checkpoint-every", "0", "--quiet", "--image", "19:16", "--hidden", "8"]);
+        a.extend(["--total-updates", total]);
+        a
+    };
+    let mut trainer = Node::spawn(DOMAIN, "trainer", &trainer_args("3"));
+    trainer.wait_log("start", Duration::from_secs(60), |l| l.contains("waiting for transitions"));
+    let mut policy = Node::spawn(DOMAIN, "expert policy", &["policy", "--namespace", "/env0", "--mode", "expert"]);
+    let sim_args = ["sim", "--namespace", "/env0", "--task", "block_pulling", "--seed", "3", "--resolution", "19", "--timeout-ms", "300"];
+    let mut sim = Node::spawn(DOMAIN, "sim", &sim_args);
+
+    // Only successful expert episodes reach the replay; the trainer exits by itself after 3 updates.
+    let log = trainer.wait_ok(Duration::from_secs(120));
+    assert!(log.contains("stopping (total_updates reached) at 3 updates"), "{log}");
+    assert!(log.contains("updates 3, env steps"), "the summary table: {log}");
+    let ck = run_dir.join("checkpoints/step_0000003");
+    let m = equiarm_sac::learner::read_manifest(&ck).unwrap();
+    assert!(m.replay_len >= 8 && m.expert_len == m.replay_len, "{m:?}");
+    assert_eq!(numbers_after(&log, "(stored "), vec![m.replay_len as u64], "{log}");
+
+    // --resume continues from the latest checkpoint up to the new total.
+    let mut args = trainer_args("6");
+    args.extend(["--resume", run]);
+    let mut resumed = Node::spawn(DOMAIN, "resumed trainer", &args);
+    let log = resumed.wait_ok(Duration::from_secs(120));
+    assert!(log.contains("at 3 updates") && log.contains("stopping (total_updates reached) at 6 updates"), "{log}");
+    assert_eq!(std::fs::read_to_string(run_dir.join("checkpoints/latest")).unwrap().trim(), "step_0000006");
+
+    for node in [&mut sim, &mut policy] {
+        node.sigint();
+        let log = node.wait_ok(Duration::from_secs(30));
+        assert!(log.contains("SIGINT received"), "{log}");
+    }
+    let sim_log = sim.log();
+    assert!(sim_log.contains("success true"), "the expert never succeeded: {sim_log}");
 }
 
 const SIZE: u32 = 19;

@@ -169,10 +169,8 @@ impl Policy {
         }
         let (u, source) = match (self.mode, self.agent.as_mut()) {
             (PolicyMode::Expert, _) => {
-                let a = &obs.expert_action;
-                let cmd = GripperCommand { header: obs.header.clone(), obs_seq: obs.seq, source: GripperCommand::SOURCE_EXPERT, ..a.clone() };
-                self.last = Some((obs.seq, cmd.clone()));
-                return Ok(cmd);
+                let source = GripperCommand::SOURCE_EXPERT;
+                return Ok(self.remember(GripperCommand { header: obs.header.clone(), obs_seq: obs.seq, source, ..obs.expert_action.clone() }));
             }
             (PolicyMode::Random, _) | (_, None) => ([(); 5].map(|_| self.rng.uniform(-1.0, 1.0)), GripperCommand::SOURCE_RANDOM),
             (mode, Some(agent)) => {
@@ -180,8 +178,7 @@ impl Policy {
                 if frame.size() != self.frame_size && self.actions == 0 {
                     warn!("frames are {} px, the actor was set up for {} px (acting on the centre crop anyway)", frame.size(), self.frame_size);
                 }
-                let act = if mode == PolicyMode::Greedy { ActMode::Greedy } else { ActMode::Sample };
-                let s = agent.config().input_size;
+                let (act, s) = (if mode == PolicyMode::Greedy { ActMode::Greedy } else { ActMode::Sample }, agent.config().input_size);
                 let t0 = Instant::now();
                 let u = equiarm_sac::learner::act_on(agent, &[&frame], s, act).map_err(|e| e.to_string())?;
                 self.record_latency(t0.elapsed().as_secs_f64());
@@ -189,24 +186,18 @@ impl Policy {
             }
         };
         let a = Action::from_normalized(u);
-        let cmd = GripperCommand {
-            header: obs.header.clone(),
-            obs_seq: obs.seq,
-            open_ratio: a.open_ratio,
-            dx: a.dx,
-            dy: a.dy,
-            dz: a.dz,
-            dtheta: a.dtheta,
-            source,
-        };
-        self.last = Some((obs.seq, cmd.clone()));
-        Ok(cmd)
+        let (header, obs_seq) = (obs.header.clone(), obs.seq);
+        let cmd = GripperCommand { header, obs_seq, open_ratio: a.open_ratio, dx: a.dx, dy: a.dy, dz: a.dz, dtheta: a.dtheta, source };
+        Ok(self.remember(cmd))
+    }
+
+    fn remember(&mut self, cmd: GripperCommand) -> GripperCommand {
+        self.last = Some((cmd.obs_seq, cmd.clone()));
+        cmd
     }
 
     fn record_latency(&mut self, s: f64) {
-        if self.latencies.len() == 100 {
-            self.latencies.pop_front();
-        }
+        if self.latencies.len() == 100 { self.latencies.pop_front(); }
         self.latencies.push_back(s);
         self.actions += 1;
     }
@@ -256,10 +247,7 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
     let mut node = RosNode::new(&args.namespace, "policy", opts)?;
     let obs_sub = node.subscription::<Observation>("observation", qos::command())?;
     let cmd_pub = node.publisher::<GripperCommand>("gripper_cmd", qos::command())?;
-    let weights_sub = match policy.learns() {
-        true => Some(node.subscription::<PolicyWeights>(&args.weights_topic, qos::latched())?),
-        false => None,
-    };
+    let weights_sub = policy.learns().then(|| node.subscription::<PolicyWeights>(&args.weights_topic, qos::latched())).transpose()?;
     let arch = if policy.learns() { format!(", {} hidden {} input {}", agent.model.name(), agent.hidden, agent.input_size) } else { String::new() };
     info!("{}: mode {:?}{arch}", node.name(), args.mode);
     let (mut sent, mut bad, mut refused) = (0u64, 0u64, HashSet::new());

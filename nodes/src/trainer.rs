@@ -207,7 +207,7 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
                 learner.push(row)?;
             }
             known = (learner.updates(), learner.replay().len(), learner.replay().expert_len(), known.3);
-            if stopping.is_none() && owed > 0 && learner.ready() {
+            if stopping.is_none() && owed > 0 && learner.ready() && learner.updates() < cfg.total_updates {
                 owed -= 1;
                 let mut l = home.take().expect("home");
                 task = Some(tokio::task::spawn_blocking(move || {
