@@ -42,6 +42,11 @@ enum Command {
     /// Writes metrics.csv/jsonl (CleanRL names), learning_curve.png, checkpoints/ and config.json into
     /// --run-dir; prints an evaluation table at the end. Ctrl-C stops with a checkpoint; --resume continues.
     Train(equiarm_nodes::train_cli::TrainArgs),
+    /// Policy node: answers each Observation on `observation` (relative to --namespace) with a
+    /// GripperCommand on `gripper_cmd` naming its seq: the actor's sampled or greedy action, the
+    /// expert's, or a random one. In sample/greedy mode it takes new actor weights from
+    /// /policy/weights (transient-local) and logs `weights version N (updates U)` on each switch.
+    Policy(equiarm_nodes::policy::PolicyArgs),
     /// Networks: diagnostics of saved (or freshly initialised) equivariant networks.
     #[command(subcommand)]
     Nn(NnCommand),
@@ -393,11 +398,17 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 println!("{}", serde_json::to_string_pretty(&cfg)?);
                 return Ok(());
             }
-            if !args.in_process {
-                bail!("the trainer node over DDS is not available in this build yet: use --in-process");
-            }
-            let summary = equiarm_nodes::train_cli::run_in_process(&args, cfg)?;
+            let summary = if args.in_process {
+                equiarm_nodes::train_cli::run_in_process(&args, cfg)?
+            } else {
+                let opts = RosOptions::from_env()?;
+                runtime()?.block_on(equiarm_nodes::trainer::run(&args, cfg, &opts))?
+            };
             equiarm_nodes::train_cli::print_summary(&summary);
+        }
+        Command::Policy(args) => {
+            let opts = RosOptions::from_env()?;
+            runtime()?.block_on(equiarm_nodes::policy::run(&args, &opts))?;
         }
         Command::Sim(SimCommand { sub: None, args }) => {
             let opts = RosOptions::from_env()?;

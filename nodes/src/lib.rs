@@ -13,3 +13,6 @@ pub mod player;
 pub mod sim;
 pub mod policy_eval;
 pub mod train_cli;
+pub mod policy;
+pub mod trainer;
+pub mod ingest;

@@ -65,6 +65,9 @@ pub struct TrainArgs {
     /// Checkpoint every N updates.
     #[arg(long)]
     pub checkpoint_every: Option<u64>,
+    /// Transitions in the replay before the first update.
+    #[arg(long)]
+    pub training_starts: Option<usize>,
     /// Run directory (metrics, learning curve, checkpoints, config).
     #[arg(long, default_value = "runs/latest")]
     pub run_dir: PathBuf,
@@ -100,10 +103,10 @@ impl TrainArgs {
             None => TrainConfig::preset(&self.preset, &task)
                 .ok_or_else(|| anyhow::anyhow!("unknown --preset `{}`: use reduced or paper", self.preset))?,
         };
-        if let Some(t) = &self.task {
-            if self.config.is_some() || t != &cfg.task {
-                cfg.task = t.clone();
-            }
+        if let Some(t) = &self.task
+            && (self.config.is_some() || t != &cfg.task)
+        {
+            cfg.task = t.clone();
         }
         if let Some(m) = &self.model {
             cfg.agent.model = ModelKind::parse(m).ok_or_else(|| anyhow::anyhow!("unknown --model `{m}`: use equi, cnn or sen"))?;
@@ -113,7 +116,7 @@ impl TrainArgs {
         }
         set!(seed => seed, total_updates => total_updates, num_envs => num_envs, eval_every => eval_every,
              eval_episodes => eval_episodes, demo_episodes => demo_episodes, batch_size => batch_size,
-             hidden => agent.hidden, checkpoint_every => checkpoint_every);
+             hidden => agent.hidden, checkpoint_every => checkpoint_every, training_starts => training_starts);
         if let Some(img) = &self.image {
             let (f, i) = img.split_once(':').ok_or_else(|| anyhow::anyhow!("--image `{img}`: expected FRAME:INPUT, e.g. 76:64"))?;
             cfg.image_size = f.parse().with_context(|| format!("--image `{img}`: frame size"))?;

@@ -418,11 +418,18 @@ fn checkpoint(learner: &Learner, slots: &[Slot], global_step: u64, evals: &[Eval
     let st = LoopState { envs: slots.iter().map(|s| (s.episode, s.actions.clone())).collect(), global_step, evals: evals.to_vec(), wall_time };
     let io = |e: String| TrainError::Io { path: dir.clone(), message: e };
     write_json(&dir.join("loop.json"), &st).map_err(io)?;
-    // `latest` names the newest complete checkpoint (written last, atomically).
-    let tmp = root.join("latest.tmp");
-    std::fs::write(&tmp, format!("{}\n", step_dir_name(learner.updates()))).map_err(|e| io(e.to_string()))?;
-    std::fs::rename(&tmp, root.join("latest")).map_err(|e| io(e.to_string()))?;
+    write_latest(run_dir, learner.updates())?;
     Ok(dir)
+}
+
+/// Point `run_dir/checkpoints/latest` at the checkpoint of `updates` (call it last, once the
+/// checkpoint is complete: the file is replaced atomically).
+pub fn write_latest(run_dir: &Path, updates: u64) -> Result<(), TrainError> {
+    let root = run_dir.join("checkpoints");
+    let io = |e: std::io::Error| TrainError::Io { path: root.clone(), message: e.to_string() };
+    let tmp = root.join("latest.tmp");
+    std::fs::write(&tmp, format!("{}\n", step_dir_name(updates))).map_err(io)?;
+    std::fs::rename(&tmp, root.join("latest")).map_err(io)
 }
 
 /// The newest checkpoint of a run directory (from `checkpoints/latest`), or `path` itself if it is

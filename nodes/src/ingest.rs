@@ -1,0 +1,137 @@
+//! What the trainer node makes of `/transitions` and `/episodes`, without DDS: replay rows with
+//! each frame stored once (per env, the last `next_obs` is reused when the next Transition's `obs`
+//! has its seq), expert demonstrations held per (env, episode) until the EpisodeResult says whether
+//! the episode succeeded (the paper keeps only successful demos), the eval env never stored.
+//! Topics are not ordered with respect to each other: a result may overtake its episode's last
+//! transitions, and then decides them on arrival.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use equiarm_msgs::msg::{EpisodeResult, Observation, Transition};
+use equiarm_sac::config::TrainConfig;
+use equiarm_sac::frame::Frame;
+use equiarm_sac::replay::Stored;
+use equiarm_sim::Action;
+
+use crate::policy::frame_of;
+
+/// What the trainer did with the transitions it received (N = stored + held + dropped + eval + bad).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Received {
+    /// Transitions received (all envs).
+    pub transitions: u64,
+    /// Rows handed to the replay.
+    pub stored: u64,
+    /// Expert rows waiting for their episode's result now.
+    pub expert_held: u64,
+    /// Expert rows of failed episodes, dropped.
+    pub expert_dropped: u64,
+    /// Transitions of the eval env (never stored).
+    pub eval: u64,
+    /// Malformed transitions (bad image, wrong size), skipped.
+    pub bad: u64,
+    /// Expert episodes decided, and kept (successful).
+    pub expert_episodes: (usize, usize),
+}
+
+type Key = (String, u32);
+
+/// Transitions and episode results → replay rows, without DDS.
+pub struct Ingest {
+    eval_env: String,
+    image_size: usize,
+    timeout_terminal: bool,
+    last_next: HashMap<String, (u64, Arc<Frame>)>,
+    held: HashMap<Key, (Vec<Stored>, bool)>,
+    decided: HashMap<Key, bool>,
+    /// What happened so far.
+    pub counts: Received,
+}
+
+impl Ingest {
+    /// For a run with `cfg`; `eval_namespace` names the eval env (`/eval` → `eval`).
+    pub fn new(cfg: &TrainConfig, eval_namespace: &str) -> Self {
+        let eval_env = eval_namespace.trim_matches('/').to_string();
+        Ingest { eval_env, image_size: cfg.image_size, timeout_terminal: cfg.timeout_terminal, last_next: HashMap::new(), held: HashMap::new(), decided: HashMap::new(), counts: Received::default() }
+    }
+
+    /// Whether an env name is the eval env.
+    pub fn is_eval(&self, env: &str) -> bool {
+        env == self.eval_env
+    }
+
+    fn frame(&self, o: &Observation) -> Result<Arc<Frame>, String> {
+        if let Some((seq, f)) = self.last_next.get(&o.env)
+            && *seq == o.seq
+        {
+            return Ok(f.clone());
+        }
+        let f = frame_of(o)?;
+        if f.size() != self.image_size {
+            return Err(format!("frame of {} px, the run's image_size is {}", f.size(), self.image_size));
+        }
+        Ok(Arc::new(f))
+    }
+
+    /// The rows to store now for `t` (none for eval, held expert or malformed transitions).
+    pub fn transition(&mut self, t: &Transition) -> Result<Vec<Stored>, String> {
+        self.counts.transitions += 1;
+        if self.is_eval(&t.obs.env) {
+            self.counts.eval += 1;
+            return Ok(vec![]);
+        }
+        let frames = self.frame(&t.obs).and_then(|o| Ok((o, self.frame(&t.next_obs)?)));
+        let (obs, next_obs) = frames.inspect_err(|_| self.counts.bad += 1)?;
+        self.last_next.insert(t.next_obs.env.clone(), (t.next_obs.seq, next_obs.clone()));
+        let a = &t.action;
+        let action = Action::new(a.open_ratio, a.dx, a.dy, a.dz, a.dtheta).to_normalized();
+        let done = t.done || (t.timeout && self.timeout_terminal);
+        let row = Stored { obs, next_obs, action, reward: t.reward, done, expert: t.expert };
+        if !t.expert {
+            self.counts.stored += 1;
+            return Ok(vec![row]);
+        }
+        let key = (t.obs.env.clone(), t.obs.episode);
+        let last = t.done || t.timeout;
+        let decided = if last { self.decided.remove(&key) } else { self.decided.get(&key).copied() };
+        match decided {
+            Some(true) => {
+                self.counts.stored += 1;
+                Ok(vec![row])
+            }
+            Some(false) => {
+                self.counts.expert_dropped += 1;
+                Ok(vec![])
+            }
+            None => {
+                let h = self.held.entry(key).or_default();
+                h.0.push(row);
+                h.1 |= last;
+                self.counts.expert_held += 1;
+                Ok(vec![])
+            }
+        }
+    }
+
+    /// The held expert rows `r` releases (its episode succeeded); drops them on failure.
+    pub fn episode(&mut self, r: &EpisodeResult) -> Vec<Stored> {
+        let key = (r.env.clone(), r.episode);
+        let (rows, complete) = self.held.remove(&key).unwrap_or_default();
+        if !complete && (r.expert || !rows.is_empty()) {
+            self.decided.insert(key, r.success);
+        }
+        if r.expert || !rows.is_empty() {
+            self.counts.expert_episodes.0 += 1;
+            self.counts.expert_episodes.1 += r.success as usize;
+        }
+        self.counts.expert_held -= rows.len() as u64;
+        if r.success {
+            self.counts.stored += rows.len() as u64;
+            rows
+        } else {
+            self.counts.expert_dropped += rows.len() as u64;
+            vec![]
+        }
+    }
+}

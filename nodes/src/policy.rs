@@ -1,0 +1,297 @@
+//! `equiarm policy`: the actor on the ROS 2 graph. It answers each `Observation` on `observation`
+//! (relative to the namespace) with a `GripperCommand` on `gripper_cmd` naming its seq, and in the
+//! learning modes (`sample`, `greedy`) takes new actor weights from `/policy/weights` (transient-local,
+//! so a late node gets the latest snapshot).
+//!
+//! Modes: `sample` (tanh(mean + std·ε), exploration), `greedy` (tanh(mean), evaluation), `expert`
+//! (sends back the Observation's `expert_action`, source EXPERT), `random` (uniform in [-1, 1]^5 from
+//! the seeded RNG, source RANDOM). A re-published Observation (same seq) gets the identical command.
+//!
+//! ## Limitations
+//! One env per node. Acting is on the runtime thread (batch 1), so a slow actor delays weights too.
+
+use std::collections::{HashSet, VecDeque};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context as _, bail};
+use equiarm_msgs::msg::{GripperCommand, Observation, PolicyWeights};
+use equiarm_sac::agent::{ActMode, Agent, AgentConfig, ModelKind};
+use equiarm_sac::config::TrainConfig;
+use equiarm_sac::frame::Frame;
+use equiarm_sim::{Action, rng::Rng};
+use log::{info, warn};
+
+use crate::ros::{RosNode, RosOptions, Subscriber, qos, shutdown_signal};
+
+/// How the node acts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum PolicyMode {
+    /// Sampled actions of the actor (training envs).
+    Sample,
+    /// The actor's mean action (evaluation envs).
+    Greedy,
+    /// The Observation's expert action (demonstrations).
+    Expert,
+    /// Uniform random actions.
+    Random,
+}
+
+/// Options of `equiarm policy`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct PolicyArgs {
+    /// Namespace of the node and its relative topics (the env's namespace).
+    #[arg(long, default_value = "/env0")]
+    pub namespace: String,
+    /// How to act.
+    #[arg(long, value_enum, default_value = "sample")]
+    pub mode: PolicyMode,
+    /// Initial actor: an actor .safetensors file, a checkpoint directory, or a run directory (its
+    /// latest checkpoint). Directories give the architecture from their manifest.
+    #[arg(long)]
+    pub checkpoint: Option<PathBuf>,
+    /// Network family when there is no manifest: equi, cnn or sen (default: the reduced preset's).
+    #[arg(long)]
+    pub model: Option<String>,
+    /// Hidden size when there is no manifest (default: the reduced preset's).
+    #[arg(long)]
+    pub hidden: Option<usize>,
+    /// Frame and network input size as FRAME:INPUT when there is no manifest (default: reduced preset).
+    #[arg(long)]
+    pub image: Option<String>,
+    /// Seed of the initial weights, the sampling noise and the random mode.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Topic of the trainer's weights.
+    #[arg(long, default_value = "/policy/weights")]
+    pub weights_topic: String,
+    /// No latency lines.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// The actor's architecture and initial weights the options describe: (agent config, frame size,
+/// actor file). A directory's manifest wins over the flags.
+pub fn architecture(args: &PolicyArgs) -> anyhow::Result<(AgentConfig, usize, Option<PathBuf>)> {
+    if let Some(path) = args.checkpoint.as_ref().filter(|p| p.is_dir()) {
+        let dir = equiarm_sac::train::find_checkpoint(path)?;
+        let m = equiarm_sac::learner::read_manifest(&dir)?;
+        return Ok((m.config.agent.clone(), m.config.image_size, Some(dir.join("actor.safetensors"))));
+    }
+    let reduced = TrainConfig::reduced("block_pulling");
+    let mut agent = reduced.agent.clone();
+    let mut frame = reduced.image_size;
+    if let Some(m) = &args.model {
+        agent.model = ModelKind::parse(m).with_context(|| format!("unknown --model `{m}`: use equi, cnn or sen"))?;
+    }
+    agent.hidden = args.hidden.unwrap_or(agent.hidden);
+    if let Some(img) = &args.image {
+        let (f, i) = img.split_once(':').with_context(|| format!("--image `{img}`: expected FRAME:INPUT, e.g. 76:64"))?;
+        frame = f.parse().with_context(|| format!("--image `{img}`: frame size"))?;
+        agent.input_size = i.parse().with_context(|| format!("--image `{img}`: input size"))?;
+    }
+    if agent.input_size > frame {
+        bail!("--image: the network input {} is larger than the frame {frame}", agent.input_size);
+    }
+    Ok((agent, frame, args.checkpoint.clone()))
+}
+
+/// The frame of an Observation (rgb8 colour, 32FC1 depth, holding); the error says what is wrong.
+pub fn frame_of(obs: &Observation) -> Result<Frame, String> {
+    let color = obs.color.rgb8_data().map_err(|e| format!("colour: {e}"))?;
+    let depth = obs.depth.float32_values().map_err(|e| format!("depth: {e}"))?;
+    if (obs.color.width, obs.color.height) != (obs.depth.width, obs.depth.height) {
+        return Err(format!("colour is {}×{}, depth {}×{}", obs.color.width, obs.color.height, obs.depth.width, obs.depth.height));
+    }
+    Frame::from_image(obs.color.width as usize, obs.color.height as usize, color.to_vec(), &depth, obs.holding).map_err(|e| e.to_string())
+}
+
+/// What became of a PolicyWeights sample.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum WeightsOutcome {
+    /// Loaded: the node now acts with this version.
+    Loaded,
+    /// Not newer than the current version; ignored.
+    Stale,
+    /// Another model or format: refused (the reason, logged once per reason).
+    Refused(String),
+    /// The payload did not load; the old weights stay.
+    Failed(String),
+}
+
+/// The acting logic, without DDS.
+pub struct Policy {
+    mode: PolicyMode,
+    agent: Option<Agent>,
+    frame_size: usize,
+    rng: Rng,
+    last: Option<(u64, GripperCommand)>,
+    version: u64,
+    latencies: VecDeque<f64>,
+    actions: u64,
+    scratch: PathBuf,
+}
+
+impl Policy {
+    /// A policy acting in `mode`; the learning modes build an actor of `agent` (seeded with `seed`),
+    /// loaded from `actor` if given.
+    pub fn new(mode: PolicyMode, agent: AgentConfig, frame_size: usize, actor: Option<&Path>, seed: u64) -> anyhow::Result<Self> {
+        let agent = match mode {
+            PolicyMode::Sample | PolicyMode::Greedy => {
+                let mut a = Agent::new(agent, seed).context("building the actor")?;
+                if let Some(p) = actor {
+                    a.load_actor(p).with_context(|| format!("loading the actor {}", p.display()))?;
+                }
+                Some(a)
+            }
+            _ => None,
+        };
+        let scratch = std::env::temp_dir().join(format!("equiarm-policy-{}-{seed}.safetensors", std::process::id()));
+        Ok(Policy { mode, agent, frame_size, rng: Rng::new(seed), last: None, version: 0, latencies: VecDeque::new(), actions: 0, scratch })
+    }
+
+    /// Whether this mode takes weights from the trainer.
+    pub fn learns(&self) -> bool {
+        self.agent.is_some()
+    }
+
+    /// Version of the weights in use (0: the initial ones).
+    pub fn version(&self) -> u64 {
+        self.version
+    }
+
+    /// The command answering `obs` (the same one again for a re-published seq).
+    pub fn answer(&mut self, obs: &Observation) -> Result<GripperCommand, String> {
+        if let Some((seq, cmd)) = &self.last
+            && *seq == obs.seq
+        {
+            return Ok(cmd.clone());
+        }
+        let (u, source) = match (self.mode, self.agent.as_mut()) {
+            (PolicyMode::Expert, _) => {
+                let source = GripperCommand::SOURCE_EXPERT;
+                return Ok(self.remember(GripperCommand { header: obs.header.clone(), obs_seq: obs.seq, source, ..obs.expert_action.clone() }));
+            }
+            (PolicyMode::Random, _) | (_, None) => ([(); 5].map(|_| self.rng.uniform(-1.0, 1.0)), GripperCommand::SOURCE_RANDOM),
+            (mode, Some(agent)) => {
+                let frame = frame_of(obs)?;
+                if frame.size() != self.frame_size && self.actions == 0 {
+                    warn!("frames are {} px, the actor was set up for {} px (acting on the centre crop anyway)", frame.size(), self.frame_size);
+                }
+                let (act, s) = (if mode == PolicyMode::Greedy { ActMode::Greedy } else { ActMode::Sample }, agent.config().input_size);
+                let t0 = Instant::now();
+                let u = equiarm_sac::learner::act_on(agent, &[&frame], s, act).map_err(|e| e.to_string())?;
+                self.record_latency(t0.elapsed().as_secs_f64());
+                (u[0], GripperCommand::SOURCE_POLICY)
+            }
+        };
+        let a = Action::from_normalized(u);
+        let (header, obs_seq) = (obs.header.clone(), obs.seq);
+        let cmd = GripperCommand { header, obs_seq, open_ratio: a.open_ratio, dx: a.dx, dy: a.dy, dz: a.dz, dtheta: a.dtheta, source };
+        Ok(self.remember(cmd))
+    }
+
+    fn remember(&mut self, cmd: GripperCommand) -> GripperCommand {
+        self.last = Some((cmd.obs_seq, cmd.clone()));
+        cmd
+    }
+
+    fn record_latency(&mut self, s: f64) {
+        if self.latencies.len() == 100 { self.latencies.pop_front(); }
+        self.latencies.push_back(s);
+        self.actions += 1;
+    }
+
+    /// Median and p95 of the last 100 actor latencies in ms, once every 100 actions.
+    pub fn latency_report(&self) -> Option<(f64, f64)> {
+        if self.actions == 0 || !self.actions.is_multiple_of(100) {
+            return None;
+        }
+        let mut v: Vec<f64> = self.latencies.iter().copied().collect();
+        v.sort_by(f64::total_cmp);
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize] * 1e3;
+        Some((at(0.5), at(0.95)))
+    }
+
+    /// Takes new weights if they are ours and newer.
+    pub fn on_weights(&mut self, w: &PolicyWeights) -> WeightsOutcome {
+        let Some(agent) = self.agent.as_mut() else { return WeightsOutcome::Refused(format!("mode {:?} takes no weights", self.mode)) };
+        let ours = agent.config().model.name();
+        if ModelKind::parse(&w.model) != Some(agent.config().model) {
+            return WeightsOutcome::Refused(format!("model '{}' is not this node's '{ours}'", w.model));
+        }
+        if w.format != "safetensors" {
+            return WeightsOutcome::Refused(format!("format '{}' is not 'safetensors'", w.format));
+        }
+        if w.version <= self.version {
+            return WeightsOutcome::Stale;
+        }
+        let loaded = std::fs::write(&self.scratch, &w.data)
+            .map_err(|e| format!("{}: {e}", self.scratch.display()))
+            .and_then(|_| agent.load_actor(&self.scratch).map_err(|e| e.to_string()));
+        let _ = std::fs::remove_file(&self.scratch);
+        match loaded {
+            Ok(()) => {
+                self.version = w.version;
+                WeightsOutcome::Loaded
+            }
+            Err(e) => WeightsOutcome::Failed(e),
+        }
+    }
+}
+
+/// Runs the node until SIGINT/SIGTERM; returns the commands sent.
+pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
+    let (agent, frame, actor) = architecture(args)?;
+    let mut policy = Policy::new(args.mode, agent.clone(), frame, actor.as_deref(), args.seed)?;
+    let mut node = RosNode::new(&args.namespace, "policy", opts)?;
+    let obs_sub = node.subscription::<Observation>("observation", qos::command())?;
+    let cmd_pub = node.publisher::<GripperCommand>("gripper_cmd", qos::command())?;
+    let weights_sub = policy.learns().then(|| node.subscription::<PolicyWeights>(&args.weights_topic, qos::latched())).transpose()?;
+    let arch = if policy.learns() { format!(", {} hidden {} input {}", agent.model.name(), agent.hidden, agent.input_size) } else { String::new() };
+    info!("{}: mode {:?}{arch}", node.name(), args.mode);
+    let (mut sent, mut bad, mut refused) = (0u64, 0u64, HashSet::new());
+    let signal = shutdown_signal();
+    tokio::pin!(signal);
+    loop {
+        tokio::select! {
+            s = &mut signal => { info!("{}: {} received, shutting down", node.name(), s?); break; }
+            r = obs_sub.recv() => {
+                let (obs, _) = r?;
+                match policy.answer(&obs) {
+                    Ok(cmd) => match cmd_pub.publish(cmd).await {
+                        Ok(()) => sent += 1,
+                        Err(e) => warn!("{e:#}"),
+                    },
+                    Err(reason) => {
+                        bad += 1;
+                        if bad.is_power_of_two() {
+                            warn!("skipping Observation seq {} of '{}': {reason} ({bad} skipped so far)", obs.seq, obs.env);
+                        }
+                    }
+                }
+                if let Some((median, p95)) = policy.latency_report().filter(|_| !args.quiet) {
+                    info!("actor latency (batch 1, last 100): median {median:.2} ms, p95 {p95:.2} ms");
+                }
+            }
+            r = recv_some(weights_sub.as_ref()) => {
+                let (w, _) = r?;
+                match policy.on_weights(&w) {
+                    WeightsOutcome::Loaded => info!("weights version {} (updates {})", w.version, w.updates),
+                    WeightsOutcome::Stale => {}
+                    WeightsOutcome::Refused(why) => if refused.insert(why.clone()) { warn!("refusing weights version {}: {why}", w.version) },
+                    WeightsOutcome::Failed(why) => warn!("weights version {} did not load, keeping version {}: {why}", w.version, policy.version()),
+                }
+            }
+        }
+    }
+    info!("{}: sent {sent} commands, skipped {bad} observations, weights version {}", node.name(), policy.version());
+    Ok(sent)
+}
+
+async fn recv_some<M: equiarm_msgs::RosMessage>(sub: Option<&Subscriber<M>>) -> anyhow::Result<(M, ros2_client::MessageInfo)> {
+    match sub {
+        Some(s) => s.recv().await,
+        None => std::future::pending().await,
+    }
+}

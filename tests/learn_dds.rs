@@ -1,0 +1,319 @@
+//! Learning over DDS: two `equiarm sim` + `equiarm policy --mode sample` pairs and one `equiarm train`
+//! trainer node with a tiny network (ARCHITECTURE §2). Guards that the policies switch to the
+//! trainer's weights, that no transition is lost between the sims and the trainer, that SIGINT stops
+//! every node cleanly with a checkpoint; and, without DDS, how the trainer stores transitions (each
+//! frame once, expert demos only from successful episodes, never the eval env) and how the policy
+//! refuses weights that are not its own. Domains 100–104 are this file's.
+
+mod support;
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, PolicyWeights, Transition};
+use equiarm_msgs::sensor_msgs::Image;
+use equiarm_msgs::std_msgs::Header;
+use equiarm_nodes::policy::{Policy, PolicyMode, WeightsOutcome};
+use equiarm_nodes::ingest::Ingest;
+use equiarm_sac::agent::{Agent, AgentConfig, ModelKind};
+use equiarm_sac::config::TrainConfig;
+
+/// A spawned `equiarm` process whose stderr is collected line by line; killed if a test panics.
+struct Node {
+    name: String,
+    child: Option<Child>,
+    log: Arc<Mutex<String>>,
+}
+
+impl Node {
+    fn spawn(domain: u16, name: &str, args: &[&str]) -> Self {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_equiarm"))
+            .args(args)
+            .env("ROS_DOMAIN_ID", domain.to_string())
+            .env("RUST_LOG", "info,rustdds=off,ros2_client=off")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap_or_else(|e| panic!("spawning equiarm {args:?}: {e}"));
+        let log = Arc::new(Mutex::new(String::new()));
+        let (sink, err) = (log.clone(), child.stderr.take().unwrap());
+        std::thread::spawn(move || {
+            for line in BufReader::new(err).lines().map_while(Result::ok) {
+                let mut l = sink.lock().unwrap();
+                l.push_str(&line);
+                l.push('\n');
+            }
+        });
+        let (sink, out) = (log.clone(), child.stdout.take().unwrap());
+        std::thread::spawn(move || {
+            for line in BufReader::new(out).lines().map_while(Result::ok) {
+                let mut l = sink.lock().unwrap();
+                l.push_str(&line);
+                l.push('\n');
+            }
+        });
+        Node { name: name.into(), child: Some(child), log }
+    }
+
+    fn log(&self) -> String {
+        self.log.lock().unwrap().clone()
+    }
+
+    /// Waits (bounded) until the log satisfies `pred`.
+    fn wait_log(&self, what: &str, limit: Duration, pred: impl Fn(&str) -> bool) {
+        let start = Instant::now();
+        while !pred(&self.log()) {
+            assert!(start.elapsed() < limit, "{}: no {what} within {limit:?}:\n{}", self.name, self.log());
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    fn sigint(&self) {
+        let pid = self.child.as_ref().unwrap().id().to_string();
+        assert!(Command::new("kill").args(["-INT", &pid]).status().unwrap().success());
+    }
+
+    /// Waits (bounded) for the exit; asserts status 0 and returns the log.
+    fn wait_ok(&mut self, limit: Duration) -> String {
+        let child = self.child.as_mut().unwrap();
+        let start = Instant::now();
+        let status = loop {
+            if let Some(s) = child.try_wait().unwrap() {
+                break s;
+            }
+            assert!(start.elapsed() < limit, "{} did not exit within {limit:?}:\n{}", self.name, self.log());
+            std::thread::sleep(Duration::from_millis(50));
+        };
+        self.child = None;
+        std::thread::sleep(Duration::from_millis(100)); // let the reader thread take the last lines
+        let log = self.log();
+        assert!(status.success(), "{} exited with {status}:\n{log}", self.name);
+        log
+    }
+}
+
+impl Drop for Node {
+    fn drop(&mut self) {
+        if let Some(c) = self.child.as_mut() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// The numbers after `prefix` on the log's lines, e.g. every N of `weights version N`.
+fn numbers_after(log: &str, prefix: &str) -> Vec<u64> {
+    log.match_indices(prefix)
+        .filter_map(|(i, _)| log[i + prefix.len()..].chars().take_while(|c| c.is_ascii_digit()).collect::<String>().parse().ok())
+        .collect()
+}
+
+#[test]
+fn two_sim_policy_pairs_train_one_trainer_over_dds_without_losing_a_transition() {
+    const DOMAIN: u16 = 100;
+    let run_dir = support::scratch("learn_dds_run");
+    let run = run_dir.to_str().unwrap();
+    let net = ["--image", "19:16", "--hidden", "8"];
+    let mut trainer_args = vec!["train", "--run-dir", run, "--batch-size", "16", "--num-envs", "2", "--demo-episodes", "0"];
+    trainer_args.extend(["--eval-every", "0", "--weights-every", "5", "--total-updates", "100000", "--training-starts", "20"]);
+    trainer_args.extend(["--idle-timeout-s", "120", "--quiet"]);
+    trainer_args.extend(net);
+    let mut trainer = Node::spawn(DOMAIN, "trainer", &trainer_args);
+    trainer.wait_log("start", Duration::from_secs(60), |l| l.contains("waiting for transitions"));
+
+    let mut policies: Vec<Node> = (0..2)
+        .map(|i| {
+            let (ns, seed) = (format!("/env{i}"), (i + 1).to_string());
+            let mut a = vec!["policy", "--namespace", &ns, "--mode", "sample", "--seed", &seed];
+            a.extend(net);
+            Node::spawn(DOMAIN, &format!("policy {ns}"), &a)
+        })
+        .collect();
+    let mut sims: Vec<Node> = (0..2)
+        .map(|i| {
+            let (ns, seed) = (format!("/env{i}"), (i + 1).to_string());
+            let a = ["sim", "--namespace", &ns, "--task", "block_pulling", "--seed", &seed, "--resolution", "19"];
+            Node::spawn(DOMAIN, &format!("sim {ns}"), &[&a[..], &["--episodes", "3", "--timeout-ms", "300"][..]].concat())
+        })
+        .collect();
+
+    // The sims run their episodes and exit by themselves; each logs the steps it published.
+    let published: u64 = sims
+        .iter_mut()
+        .map(|s| {
+            let log = s.wait_ok(Duration::from_secs(120));
+            let steps = numbers_after(&log, "steps: ");
+            assert_eq!(steps.len(), 1, "{log}");
+            assert!(log.contains("rejected: 0"), "{log}");
+            steps[0]
+        })
+        .sum();
+    assert!(published >= 200, "only {published} env steps");
+    // Both policies acted with the trainer's weights after its first update (version 2 and later).
+    for p in &policies {
+        p.wait_log("weights version >= 2", Duration::from_secs(60), |l| numbers_after(l, "weights version ").iter().any(|&v| v >= 2));
+    }
+
+    trainer.sigint();
+    let log = trainer.wait_ok(Duration::from_secs(60));
+    let received = numbers_after(&log, "received ");
+    assert_eq!(received, vec![published], "transitions published by the sims vs received by the trainer:\n{log}");
+    assert!(log.contains(&format!("received {published} transitions (stored {published}, expert held 0, eval 0)")), "{log}");
+    assert!(log.contains("stopping (signal)"), "{log}");
+    let latest = std::fs::read_to_string(run_dir.join("checkpoints/latest")).expect("no checkpoints/latest");
+    let ck = run_dir.join("checkpoints").join(latest.trim());
+    for f in ["manifest.json", "actor.safetensors", "replay.bin.zst", "trainer.json"] {
+        assert!(ck.join(f).is_file(), "{} lacks {f}", ck.display());
+    }
+    let manifest = equiarm_sac::learner::read_manifest(&ck).unwrap();
+    assert_eq!((manifest.replay_len as u64, manifest.config.agent.hidden, manifest.config.image_size), (published, 8, 19));
+    assert!(manifest.updates >= 1 && run_dir.join("metrics.csv").is_file());
+
+    for p in &mut policies {
+        p.sigint();
+        let log = p.wait_ok(Duration::from_secs(30));
+        assert!(log.contains("SIGINT received") && log.contains("skipped 0 observations"), "{log}");
+        if numbers_after(&log, "sent ")[0] >= 100 {
+            assert!(log.contains("actor latency (batch 1, last 100): median"), "{log}");
+        }
+    }
+}
+
+#[test]
+fn an_expert_pair_feeds_successful_demos_and_the_trainer_stops_at_total_updates_and_resumes() {
+    const DOMAIN: u16 = 101;
+    let run_dir = support::scratch("learn_dds_expert");
+    let run = run_dir.to_str().unwrap();
+    let trainer_args = |total: &'static str| {
+        let mut a = vec!["train", "--run-dir", run, "--batch-size", "8", "--num-envs", "1", "--demo-episodes", "0", "--eval-every", "0"];
+        a.extend(["--weights-every", "2", "--training-starts", "8", "--checkpoint-every", "0", "--quiet", "--image", "19:16", "--hidden", "8"]);
+        a.extend(["--total-updates", total]);
+        a
+    };
+    let mut trainer = Node::spawn(DOMAIN, "trainer", &trainer_args("3"));
+    trainer.wait_log("start", Duration::from_secs(60), |l| l.contains("waiting for transitions"));
+    let mut policy = Node::spawn(DOMAIN, "expert policy", &["policy", "--namespace", "/env0", "--mode", "expert"]);
+    let sim_args = ["sim", "--namespace", "/env0", "--task", "block_pulling", "--seed", "3", "--resolution", "19", "--timeout-ms", "300"];
+    let mut sim = Node::spawn(DOMAIN, "sim", &sim_args);
+
+    // Only successful expert episodes reach the replay; the trainer exits by itself after 3 updates.
+    let log = trainer.wait_ok(Duration::from_secs(120));
+    assert!(log.contains("stopping (total_updates reached) at 3 updates"), "{log}");
+    assert!(log.contains("updates 3, env steps"), "the summary table: {log}");
+    let ck = run_dir.join("checkpoints/step_0000003");
+    let m = equiarm_sac::learner::read_manifest(&ck).unwrap();
+    assert!(m.replay_len >= 8 && m.expert_len == m.replay_len, "{m:?}");
+    assert_eq!(numbers_after(&log, "(stored "), vec![m.replay_len as u64], "{log}");
+
+    // --resume continues from the latest checkpoint up to the new total.
+    let mut args = trainer_args("6");
+    args.extend(["--resume", run]);
+    let mut resumed = Node::spawn(DOMAIN, "resumed trainer", &args);
+    let log = resumed.wait_ok(Duration::from_secs(120));
+    assert!(log.contains("at 3 updates") && log.contains("stopping (total_updates reached) at 6 updates"), "{log}");
+    assert_eq!(std::fs::read_to_string(run_dir.join("checkpoints/latest")).unwrap().trim(), "step_0000006");
+
+    for node in [&mut sim, &mut policy] {
+        node.sigint();
+        let log = node.wait_ok(Duration::from_secs(30));
+        assert!(log.contains("SIGINT received"), "{log}");
+    }
+    let sim_log = sim.log();
+    assert!(sim_log.contains("success true"), "the expert never succeeded: {sim_log}");
+}
+
+const SIZE: u32 = 19;
+
+fn observation(env: &str, episode: u32, seq: u64, shade: u8) -> Observation {
+    let n = (SIZE * SIZE) as usize;
+    let color = Image::rgb8(Header::default(), SIZE, SIZE, vec![shade; n * 3]).unwrap();
+    let depth = Image::float32(Header::default(), SIZE, SIZE, &vec![0.5 + shade as f32 / 1000.0; n]).unwrap();
+    let expert_action = GripperCommand { obs_seq: seq, open_ratio: 1.0, dx: 0.01, source: GripperCommand::SOURCE_EXPERT, ..Default::default() };
+    Observation { seq, env: env.into(), episode, step: seq as u32, color, depth, expert_action, ..Default::default() }
+}
+
+fn transition(env: &str, episode: u32, seq: u64, expert: bool, last: bool) -> Transition {
+    let (obs, next_obs) = (observation(env, episode, seq, seq as u8), observation(env, episode, seq + 1, seq as u8 + 1));
+    let action = GripperCommand { obs_seq: seq, open_ratio: 1.0, dx: 0.05, dtheta: -std::f32::consts::FRAC_PI_4, ..Default::default() };
+    Transition { obs, next_obs, action, reward: last as u8 as f32, done: last, expert, ..Default::default() }
+}
+
+fn result(env: &str, episode: u32, success: bool, expert: bool) -> EpisodeResult {
+    EpisodeResult { env: env.into(), episode, success, expert, ..Default::default() }
+}
+
+#[test]
+fn the_trainer_stores_each_frame_once_keeps_only_successful_demos_and_never_the_eval_env() {
+    let cfg = TrainConfig { image_size: SIZE as usize, ..TrainConfig::reduced("block_pulling") };
+    let mut ing = Ingest::new(&cfg, "/eval");
+    // Consecutive transitions share the frame between them.
+    let a = ing.transition(&transition("env0", 0, 0, false, false)).unwrap();
+    let b = ing.transition(&transition("env0", 0, 1, false, false)).unwrap();
+    assert_eq!((a.len(), b.len()), (1, 1));
+    assert!(std::sync::Arc::ptr_eq(&a[0].next_obs, &b[0].obs), "the shared frame was stored twice");
+    assert!(!std::sync::Arc::ptr_eq(&a[0].obs, &a[0].next_obs));
+    assert_eq!(a[0].action, [1.0, 1.0, 0.0, 0.0, -1.0], "physical command → normalised action");
+    // Another env's transition with the same seq does not reuse env0's frame.
+    let c = ing.transition(&transition("env1", 0, 2, false, false)).unwrap();
+    assert!(!std::sync::Arc::ptr_eq(&c[0].obs, &b[0].next_obs));
+    // The eval env is never stored.
+    assert!(ing.transition(&transition("eval", 0, 0, false, false)).unwrap().is_empty());
+
+    // Expert demos: held until the result; a failed episode's are dropped.
+    assert!(ing.transition(&transition("env2", 0, 0, true, false)).unwrap().is_empty());
+    assert!(ing.transition(&transition("env2", 0, 1, true, true)).unwrap().is_empty());
+    assert_eq!(ing.episode(&result("env2", 0, true, true)).len(), 2);
+    assert!(ing.transition(&transition("env2", 1, 3, true, true)).unwrap().is_empty());
+    assert!(ing.episode(&result("env2", 1, false, true)).is_empty());
+    // A result that overtakes its episode's last transitions decides them on arrival.
+    assert!(ing.transition(&transition("env3", 0, 0, true, false)).unwrap().is_empty());
+    assert_eq!(ing.episode(&result("env3", 0, true, true)).len(), 1);
+    assert_eq!(ing.transition(&transition("env3", 0, 1, true, true)).unwrap().len(), 1);
+    assert!(ing.episode(&result("env4", 0, false, true)).is_empty());
+    assert!(ing.transition(&transition("env4", 0, 0, true, true)).unwrap().is_empty());
+
+    // A malformed frame is refused with the reason.
+    let mut bad = transition("env5", 0, 0, false, false);
+    bad.obs.depth.encoding = "16UC1".into();
+    assert!(ing.transition(&bad).unwrap_err().contains("16UC1"));
+    let n = &ing.counts;
+    assert_eq!((n.transitions, n.stored, n.expert_held, n.expert_dropped, n.eval, n.bad), (11, 7, 0, 2, 1, 1));
+}
+
+#[test]
+fn the_policy_refuses_foreign_weights_and_answers_a_repeated_seq_identically() {
+    let arch = AgentConfig { model: ModelKind::Equi, hidden: 8, input_size: 16, ..AgentConfig::default() };
+    let mut policy = Policy::new(PolicyMode::Sample, arch.clone(), SIZE as usize, None, 7).unwrap();
+    let scratch = support::scratch("learn_dds_weights").join("actor.safetensors");
+    let data = Agent::new(arch, 99).unwrap().actor_bytes(&scratch).unwrap();
+    let weights = |version, model: &str, format: &str, data: Vec<u8>| PolicyWeights { version, updates: 3, model: model.into(), format: format.into(), data, ..Default::default() };
+
+    let o = policy.on_weights(&weights(5, "cnn", "safetensors", data.clone()));
+    assert!(matches!(&o, WeightsOutcome::Refused(why) if why.contains("'cnn'")), "{o:?}");
+    let o = policy.on_weights(&weights(5, "equi", "npz", data.clone()));
+    assert!(matches!(&o, WeightsOutcome::Refused(why) if why.contains("npz")), "{o:?}");
+    assert_eq!(policy.version(), 0);
+    let before = policy.answer(&observation("env0", 0, 0, 40)).unwrap();
+    assert_eq!(policy.on_weights(&weights(2, "equi", "safetensors", data.clone())), WeightsOutcome::Loaded);
+    assert_eq!(policy.on_weights(&weights(2, "equi", "safetensors", data.clone())), WeightsOutcome::Stale);
+    let o = policy.on_weights(&weights(3, "equi", "safetensors", b"not safetensors".to_vec()));
+    assert!(matches!(o, WeightsOutcome::Failed(_)), "{o:?}");
+    assert_eq!(policy.version(), 2, "a bad payload keeps the old weights");
+
+    // A re-published Observation (same seq) gets the same command even in sample mode.
+    let again = policy.answer(&observation("env0", 0, 0, 40)).unwrap();
+    assert_eq!(again, before);
+    let next = policy.answer(&observation("env0", 0, 1, 41)).unwrap();
+    assert_eq!((next.obs_seq, next.source), (1, GripperCommand::SOURCE_POLICY));
+    assert_ne!(next, before);
+    // A malformed image is an error with the reason, not a panic.
+    let mut bad = observation("env0", 0, 2, 42);
+    bad.color.data.truncate(10);
+    assert!(policy.answer(&bad).unwrap_err().contains("colour"));
+    // Expert mode sends back the expert's action for that seq.
+    let mut expert = Policy::new(PolicyMode::Expert, AgentConfig::default(), 152, None, 0).unwrap();
+    let e = expert.answer(&observation("env0", 0, 4, 1)).unwrap();
+    assert_eq!((e.obs_seq, e.source, e.dx), (4, GripperCommand::SOURCE_EXPERT, 0.01));
+}
