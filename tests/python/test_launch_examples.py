@@ -132,3 +132,125 @@ def test_read_bag_metadata_parser():
     meta = ("rosbag2_bagfile_information:\n  version: 8\n  storage_identifier: mcap\n"
             "  relative_file_paths:\n    - run_0.mcap\n    - run_1.mcap\n  duration:\n    nanoseconds: 5\n")
     assert rb.relative_file_paths(meta) == ["run_0.mcap", "run_1.mcap"]
+
+
+# --- equiarm.launch.py with stub `launch` / `launch_ros` modules ---------------------------------------
+
+class _Action:
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+
+def _stub_launch_modules():
+    class LaunchConfiguration:
+        def __init__(self, name, default=None):
+            self.name = name
+
+        def perform(self, context):
+            return context.launch_configurations[self.name]
+
+    class DeclareLaunchArgument(_Action):
+        def __init__(self, name, default_value=None, description=""):
+            super().__init__(name)
+            self.name, self.default_value = name, default_value
+
+    class LaunchDescription(_Action):
+        def __init__(self, entities=()):
+            super().__init__()
+            self.entities = list(entities)
+
+    mods = {name: types.ModuleType(name) for name in
+            ("launch", "launch.actions", "launch.substitutions", "launch_ros", "launch_ros.actions")}
+    mods["launch"].LaunchDescription = LaunchDescription
+    acts = mods["launch.actions"]
+    acts.DeclareLaunchArgument = DeclareLaunchArgument
+    for name in ("ExecuteProcess", "OpaqueFunction", "Shutdown", "RegisterEventHandler", "TimerAction",
+                 "SetEnvironmentVariable", "LogInfo", "GroupAction"):
+        setattr(acts, name, type(name, (_Action,), {}))
+    mods["launch.substitutions"].LaunchConfiguration = LaunchConfiguration
+    mods["launch_ros.actions"].Node = type("Node", (_Action,), {})
+    mods["launch"].actions, mods["launch"].substitutions = acts, mods["launch.substitutions"]
+    mods["launch_ros"].actions = mods["launch_ros.actions"]
+    return mods
+
+
+@pytest.fixture
+def launch_file(monkeypatch):
+    for name, mod in _stub_launch_modules().items():
+        monkeypatch.setitem(sys.modules, name, mod)
+    spec = importlib.util.spec_from_file_location("equiarm_launch", SCRIPTS / "equiarm.launch.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+
+    def processes(**overrides):
+        ld = mod.generate_launch_description()
+        declared = {e.name: e.default_value for e in ld.entities if type(e).__name__ == "DeclareLaunchArgument"}
+        unknown = set(overrides) - set(declared)
+        assert not unknown, f"not declared: {unknown}"
+        context = types.SimpleNamespace(launch_configurations={**declared, **overrides})
+        (opaque,) = [e for e in ld.entities if type(e).__name__ == "OpaqueFunction"]
+        actions = opaque.kwargs["function"](context)
+        assert all(type(a).__name__ == "ExecuteProcess" for a in actions)
+        return declared, {a.kwargs["name"]: a for a in actions}
+
+    return processes
+
+
+def _flag(cmd, name):
+    return cmd[cmd.index(name) + 1]
+
+
+def test_launch_file_declares_its_arguments(launch_file):
+    declared, _ = launch_file()
+    for name in ("task", "preset", "num_envs", "seed", "run_dir", "total_updates", "equiarm"):
+        assert name in declared
+    assert declared["equiarm"] == "equiarm" and declared["preset"] == "reduced"
+
+
+def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
+    _, procs = launch_file(task="block_picking", num_envs="3", seed="7", run_dir="runs/x", total_updates="40",
+                           equiarm="/opt/eq/equiarm")
+    cfg = json.loads((SCRIPTS / "configs" / "reduced_block_picking.json").read_text())
+    frame, image = cfg["image_size"], f"{cfg['image_size']}:{cfg['agent']['input_size']}"
+    assert sorted(procs) == sorted(["recorder", "trainer", "sim_env0", "policy_env0", "sim_env1", "policy_env1",
+                                    "sim_env2", "policy_env2", "sim_eval", "policy_eval"])
+    assert all(p.kwargs["cmd"][0] == "/opt/eq/equiarm" for p in procs.values())
+    assert procs["recorder"].kwargs["cmd"][1:] == ["record", "--all", "-q", "-o", os.path.join("runs/x", "bag")]
+    tr = procs["trainer"].kwargs["cmd"]
+    assert tr[1] == "train" and "--in-process" not in tr
+    assert (_flag(tr, "--preset"), _flag(tr, "--task"), _flag(tr, "--num-envs"), _flag(tr, "--seed"),
+            _flag(tr, "--run-dir"), _flag(tr, "--total-updates"), _flag(tr, "--eval-namespace")) == \
+        ("reduced", "block_picking", "3", "7", "runs/x", "40", "/eval")
+    assert "on_exit" in procs["trainer"].kwargs  # the launch ends with the trainer
+    for k, ns in enumerate(["/env0", "/env1", "/env2", "/eval"]):
+        name = ns.strip("/")
+        sim, pol = procs[f"sim_{name}"].kwargs["cmd"], procs[f"policy_{name}"].kwargs["cmd"]
+        seed = 7 + (1000 if ns == "/eval" else k)
+        assert sim[1] == "sim" and _flag(sim, "--namespace") == ns and _flag(sim, "--task") == "block_picking"
+        assert _flag(sim, "--seed") == str(seed) and _flag(sim, "--resolution") == str(frame)
+        assert pol[1] == "policy" and _flag(pol, "--namespace") == ns
+        assert _flag(pol, "--mode") == ("greedy" if ns == "/eval" else "sample")
+        assert _flag(pol, "--image") == image and _flag(pol, "--hidden") == str(cfg["agent"]["hidden"])
+        assert _flag(pol, "--model") == cfg["agent"]["model"]
+
+
+def test_launch_file_paper_preset_and_config_file(launch_file, tmp_path):
+    _, procs = launch_file(preset="paper", num_envs="1")
+    paper = json.loads((SCRIPTS / "configs" / "paper_block_pulling.json").read_text())
+    assert _flag(procs["policy_env0"].kwargs["cmd"], "--image") == \
+        f"{paper['image_size']}:{paper['agent']['input_size']}"
+    assert "--total-updates" not in procs["trainer"].kwargs["cmd"]
+    cfg = dict(paper, image_size=100, agent=dict(paper["agent"], input_size=90, hidden=8, model="cnn"))
+    f = tmp_path / "mine.json"
+    f.write_text(json.dumps(cfg))
+    _, procs = launch_file(config=str(f), num_envs="2", model="sen")
+    tr = procs["trainer"].kwargs["cmd"]
+    assert _flag(tr, "--config") == str(f) and "--preset" not in tr and _flag(tr, "--model") == "sen"
+    pol = procs["policy_env1"].kwargs["cmd"]
+    assert (_flag(pol, "--image"), _flag(pol, "--hidden"), _flag(pol, "--model")) == ("100:90", "8", "sen")
+    assert len([p for p in procs if p.startswith("sim_")]) == 3
+
+
+def test_launch_scripts_compile():
+    for name in ("equiarm.launch.py", "drive_sim.py", "read_bag.py"):
+        compile((SCRIPTS / name).read_text(), name, "exec")
