@@ -254,3 +254,74 @@ def test_launch_file_paper_preset_and_config_file(launch_file, tmp_path):
 def test_launch_scripts_compile():
     for name in ("equiarm.launch.py", "drive_sim.py", "read_bag.py"):
         compile((SCRIPTS / name).read_text(), name, "exec")
+
+
+# --- demo.sh and eval.sh ------------------------------------------------------------------------------
+
+def _has_policy(binary):
+    return subprocess.run([binary, "policy", "--help"], capture_output=True, timeout=30).returncode == 0
+
+
+def _policy_shim(tmp_path):
+    """EQUIARM_BIN for the scripts: the real binary, except that while it has no `policy` subcommand,
+    `policy --mode expert|greedy` is emulated by drive_sim.py answering with the expert action."""
+    if _has_policy(BIN):
+        return BIN
+    shim = tmp_path / "equiarm"
+    shim.write_text(f"""#!/usr/bin/env bash
+if [ "$1" = policy ]; then
+  shift; ns=/env0
+  while [ $# -gt 0 ]; do case $1 in --namespace) ns=$2; shift 2 ;; *) shift ;; esac; done
+  exec {sys.executable} {SCRIPTS / 'drive_sim.py'} --namespace "$ns" --episodes 1000000 --quiet-steps --timeout-s 600
+fi
+exec {BIN} "$@"
+""")
+    shim.chmod(0o755)
+    return str(shim)
+
+
+def _leftovers(marker):
+    out = subprocess.run(["ps", "-eo", "pid=,args="], capture_output=True, text=True).stdout
+    return [line for line in out.splitlines() if marker in line and "ps -eo" not in line]
+
+
+@needs_bin
+def test_demo_sh_records_expert_episodes_and_leaves_nothing_running(tmp_path):
+    pytest.importorskip("cyclonedds")
+    pytest.importorskip("mcap_ros2")
+    out = tmp_path / "demo"
+    env = dict(os.environ, EQUIARM_BIN=_policy_shim(tmp_path), ROS_DOMAIN_ID=str(random.randint(120, 200)))
+    r = subprocess.run(["bash", str(SCRIPTS / "demo.sh"), "--num-envs", "2", "--episodes", "2", "--out", str(out)],
+                       env=env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert f"bag: {out / 'bag'}" in r.stdout
+    assert "4 episodes" in r.stdout  # equiarm bag eval's table
+    s = json.loads(subprocess.run([sys.executable, str(SCRIPTS / "read_bag.py"), str(out / "bag"), "--json"],
+                                  capture_output=True, text=True, timeout=120, check=True).stdout)
+    assert sorted((e["env"], e["episode"]) for e in s["episodes"]) == [("env0", 0), ("env0", 1), ("env1", 0), ("env1", 1)]
+    assert all(e["expert"] for e in s["episodes"]) and s["train"]["successes"] >= 2
+    assert not _leftovers(str(out)), _leftovers(str(out))
+
+
+def test_eval_sh_refuses_without_a_checkpoint(tmp_path):
+    r = subprocess.run(["bash", str(SCRIPTS / "eval.sh"), "--task", "block_pulling"], capture_output=True,
+                       text=True, timeout=30, env=dict(os.environ, EQUIARM_BIN="/bin/true"))
+    assert r.returncode == 2 and "--checkpoint" in r.stderr
+    r = subprocess.run(["bash", str(SCRIPTS / "eval.sh"), "--checkpoint", str(tmp_path / "none")],
+                       capture_output=True, text=True, timeout=30, env=dict(os.environ, EQUIARM_BIN="/bin/true"))
+    assert r.returncode == 2 and "does not exist" in r.stderr
+
+
+def test_multihost_sh_skips_without_root():
+    if os.geteuid() == 0 and not _can_drop_root():
+        pytest.skip("running as root without setpriv")
+    cmd = ["bash", str(SCRIPTS / "multihost.sh"), "--check-discovery"]
+    if os.geteuid() == 0:
+        cmd = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"] + cmd
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=30)
+    assert r.returncode == 0 and "skipped" in r.stdout, r.stdout + r.stderr
+
+
+def _can_drop_root():
+    import shutil
+    return shutil.which("setpriv") is not None
