@@ -1,0 +1,110 @@
+"""ROS 2 launch file of the equiarm suite: the same processes as the bash scripts, started by
+`ros2 launch`.
+
+    ros2 launch launch_scripts/equiarm.launch.py task:=block_pulling num_envs:=5
+    ros2 launch launch_scripts/equiarm.launch.py task:=drawer_opening preset:=paper run_dir:=runs/drawer \
+        equiarm:=$HOME/.cache/equiarm/target/release/equiarm
+
+Processes (all `ExecuteProcess`: equiarm is one Rust program, not a ROS package executable):
+- the recorder: `equiarm record --all -q -o <run_dir>/bag`;
+- the trainer: `equiarm train --preset P --task T --num-envs N --seed S --run-dir <run_dir>
+  --eval-namespace /eval [--total-updates U] [--model M]` (over DDS); when it exits the whole launch
+  shuts down (the recorder gets SIGINT and closes its bag);
+- N training pairs: `equiarm sim --namespace /envK --task T --seed S+K --resolution FRAME` and
+  `equiarm policy --namespace /envK --mode sample --model M --hidden H --image FRAME:INPUT --seed S+K`;
+- one evaluation pair in /eval: the sim with seed S+1000 and the policy in `--mode greedy`.
+FRAME, INPUT and H (and the default model) come from the preset's config,
+`launch_scripts/configs/<preset>_<task>.json` (written by `configs/regenerate.sh` from
+`equiarm train --print-config`), or from the file given as `config:=FILE.json`, which the trainer
+then gets with `--config` instead of `--preset`.
+
+Arguments: task, preset (reduced | paper), num_envs, seed, run_dir, total_updates (empty: the
+preset's), model (empty: the config's), config (empty: the preset's file), equiarm (path of the
+binary; default `equiarm` on PATH). ROS_DOMAIN_ID and the other ROS variables of the environment
+apply to every process. Needs the `launch` package only (launch_ros is not used: no ROS package
+executables are involved); nothing is built here.
+"""
+
+import json
+import os
+
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, ExecuteProcess, OpaqueFunction, Shutdown
+from launch.substitutions import LaunchConfiguration
+
+HERE = os.path.dirname(os.path.realpath(__file__))
+EVAL_NAMESPACE = "/eval"
+EVAL_SEED_OFFSET = 1000
+
+ARGUMENTS = [
+    ("task", "block_pulling", "block_pulling, block_pushing, block_picking, drawer_opening or block_in_bowl"),
+    ("preset", "reduced", "reduced (2-core CPU) or paper (PAPER_SPEC sizes)"),
+    ("num_envs", "5", "training sim+policy pairs /env0 ... /envN-1"),
+    ("seed", "0", "base seed: env K uses seed+K, the eval env seed+1000"),
+    ("run_dir", "runs/launch", "run directory of the trainer; the bag goes to <run_dir>/bag"),
+    ("total_updates", "", "gradient updates (empty: the preset's)"),
+    ("model", "", "equi, cnn or sen (empty: the config's)"),
+    ("config", "", "a training config JSON instead of the preset (sizes are read from it)"),
+    ("equiarm", "equiarm", "path of the equiarm binary"),
+]
+
+
+def load_config(preset, task, config_file):
+    path = config_file or os.path.join(HERE, "configs", f"{preset}_{task}.json")
+    with open(path) as f:
+        return json.load(f)
+
+
+def commands(args):
+    """The command lines, as (name, argv) pairs, for the launch arguments `args` (a dict of strings).
+    Kept free of launch types so it can be read and tested on its own."""
+    exe, task, preset, run_dir = args["equiarm"], args["task"], args["preset"], args["run_dir"]
+    n, seed = int(args["num_envs"]), int(args["seed"])
+    cfg = load_config(preset, task, args.get("config", ""))
+    frame, size = int(cfg["image_size"]), int(cfg["agent"]["input_size"])
+    hidden = int(cfg["agent"]["hidden"])
+    model = args.get("model") or cfg["agent"]["model"]
+    image = f"{frame}:{size}"
+
+    cmds = [("recorder", [exe, "record", "--all", "-q", "-o", os.path.join(run_dir, "bag")])]
+    trainer = [exe, "train"]
+    trainer += ["--config", args["config"]] if args.get("config") else ["--preset", preset]
+    trainer += ["--task", task, "--num-envs", str(n), "--seed", str(seed), "--run-dir", run_dir,
+                "--eval-namespace", EVAL_NAMESPACE]
+    if args.get("total_updates"):
+        trainer += ["--total-updates", str(int(args["total_updates"]))]
+    if args.get("model"):
+        trainer += ["--model", model]
+    cmds.append(("trainer", trainer))
+
+    def pair(ns, env_seed, mode):
+        name = ns.strip("/")
+        sim = [exe, "sim", "--namespace", ns, "--task", task, "--seed", str(env_seed), "--resolution", str(frame)]
+        policy = [exe, "policy", "--namespace", ns, "--mode", mode, "--model", model, "--hidden", str(hidden),
+                  "--image", image, "--seed", str(env_seed)]
+        return [(f"sim_{name}", sim), (f"policy_{name}", policy)]
+
+    for k in range(n):
+        cmds += pair(f"/env{k}", seed + k, "sample")
+    cmds += pair(EVAL_NAMESPACE, seed + EVAL_SEED_OFFSET, "greedy")
+    return cmds
+
+
+def launch_setup(context, *_args, **_kwargs):
+    args = {name: LaunchConfiguration(name).perform(context) for name, _, _ in ARGUMENTS}
+    actions = []
+    for name, cmd in commands(args):
+        extra = {}
+        if name == "trainer":
+            extra["on_exit"] = Shutdown(reason="the trainer finished")
+        # SIGINT first (launch's default on shutdown): the recorder closes its bag, the trainer checkpoints.
+        actions.append(ExecuteProcess(cmd=cmd, name=name, output="screen", sigterm_timeout="10",
+                                      sigkill_timeout="5", **extra))
+    return actions
+
+
+def generate_launch_description():
+    return LaunchDescription(
+        [DeclareLaunchArgument(name, default_value=default, description=desc) for name, default, desc in ARGUMENTS]
+        + [OpaqueFunction(function=launch_setup)]
+    )

@@ -1,0 +1,165 @@
+# shellcheck shell=bash
+# Shared by the launch scripts (sourced, not run): find or build the equiarm binary, start processes
+# each in its own process group, and stop them all (SIGINT, up to 10 s, then SIGKILL).
+#
+#   source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
+#   eqa_bin                      # sets EQUIARM_BIN (builds once when it is unset)
+#   eqa_start NAME LOG cmd...    # starts cmd in a new session (own process group), logs to LOG
+#   eqa_stop_all                 # SIGINT to every group started, wait <= EQA_STOP_TIMEOUT_S, SIGKILL
+#   trap eqa_on_exit EXIT; trap 'exit 130' INT; trap 'exit 143' TERM
+
+EQA_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+EQA_PIDS=()
+EQA_NAMES=()
+EQA_STOP_TIMEOUT_S=${EQA_STOP_TIMEOUT_S:-10}
+EQA_EXIT_MESSAGE=""  # printed after everything stopped, on any exit
+EQA_DEFAULT_SIGNAL=()
+if env --default-signal=INT true 2>/dev/null; then EQA_DEFAULT_SIGNAL=(env --default-signal=INT,QUIT); fi
+
+eqa_log() { printf '[%s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
+
+# EQUIARM_BIN when set (nothing is built); else `cargo build` of the dev profile (dependencies and the
+# hot crates optimised, as the tests build it) into CARGO_TARGET_DIR (default ~/.cache/equiarm/target).
+eqa_bin() {
+  if [ -n "${EQUIARM_BIN:-}" ]; then
+    [ -x "$EQUIARM_BIN" ] || command -v "$EQUIARM_BIN" >/dev/null \
+      || { eqa_log "EQUIARM_BIN=$EQUIARM_BIN is not an executable"; return 1; }
+    return 0
+  fi
+  export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/equiarm/target}"
+  eqa_log "building equiarm (cargo build --locked --bin equiarm, target dir $CARGO_TARGET_DIR)"
+  (cd "$EQA_ROOT" && cargo build --locked --bin equiarm) >&2
+  EQUIARM_BIN="$CARGO_TARGET_DIR/debug/equiarm"
+  export EQUIARM_BIN
+}
+
+# eqa_start NAME LOG cmd... : runs cmd in its own session and process group (setsid; the group id is
+# the pid), stdout+stderr to LOG.
+eqa_start() {
+  local name=$1 log=$2
+  shift 2
+  # A script's background commands start with SIGINT ignored (and a script started in the background
+  # cannot un-ignore it): reset it in the child with `env --default-signal` (coreutils >= 8.31) when
+  # available, so that SIGINT stops the process.
+  ( trap - INT QUIT; exec setsid "${EQA_DEFAULT_SIGNAL[@]}" "$@" >"$log" 2>&1 </dev/null ) &
+  EQA_PIDS+=("$!")
+  EQA_NAMES+=("$name")
+  eqa_log "started $name (pid $!): $*"
+}
+
+# Members of process group $1 that are not zombies.
+eqa_group_alive() {
+  ps -eo pgid=,stat= | awk -v g="$1" '$1 == g && $2 !~ /^Z/ { found = 1 } END { exit !found }'
+}
+
+# eqa_running NAME: true while the process started as NAME (or a member of its group) runs.
+eqa_running() {
+  local i
+  for i in "${!EQA_NAMES[@]}"; do
+    [ "${EQA_NAMES[$i]}" = "$1" ] && { eqa_group_alive "${EQA_PIDS[$i]}"; return; }
+  done
+  return 1
+}
+
+# eqa_stop NAME...: SIGINT to those groups, wait for them (<= EQA_STOP_TIMEOUT_S), then SIGKILL.
+eqa_stop() {
+  local names=" $* " pids=() i pid deadline left
+  for i in "${!EQA_NAMES[@]}"; do
+    [[ "$names" == *" ${EQA_NAMES[$i]} "* ]] && pids+=("${EQA_PIDS[$i]}")
+  done
+  _eqa_stop_pids "${pids[@]}"
+}
+
+eqa_stop_all() { _eqa_stop_pids "${EQA_PIDS[@]}"; }
+
+_eqa_stop_pids() {
+  local pid left deadline=$((SECONDS + EQA_STOP_TIMEOUT_S))
+  [ $# -gt 0 ] || return 0
+  for pid in "$@"; do kill -INT -- "-$pid" 2>/dev/null || true; done
+  while :; do
+    left=()
+    for pid in "$@"; do eqa_group_alive "$pid" && left+=("$pid"); done
+    [ ${#left[@]} -eq 0 ] && break
+    if [ $SECONDS -ge $deadline ]; then
+      eqa_log "still running after ${EQA_STOP_TIMEOUT_S} s, SIGKILL: process groups ${left[*]}"
+      for pid in "${left[@]}"; do kill -KILL -- "-$pid" 2>/dev/null || true; done
+      break
+    fi
+    sleep 0.2
+  done
+  for pid in "$@"; do wait "$pid" 2>/dev/null || true; done
+}
+
+# eqa_wait_for NAME TIMEOUT_S: waits until NAME exits (0) or the timeout passes (1).
+eqa_wait_for() {
+  local deadline=$((SECONDS + $2))
+  while eqa_running "$1"; do
+    [ $SECONDS -ge $deadline ] && return 1
+    sleep 0.5
+  done
+  return 0
+}
+
+# eqa_exit_status NAME: exit status of a finished process started as NAME.
+eqa_exit_status() {
+  local i
+  for i in "${!EQA_NAMES[@]}"; do
+    if [ "${EQA_NAMES[$i]}" = "$1" ]; then
+      wait "${EQA_PIDS[$i]}"
+      return
+    fi
+  done
+  return 127
+}
+
+eqa_on_exit() {
+  local rc=$?
+  trap - EXIT INT TERM
+  eqa_stop_all
+  [ -z "$EQA_EXIT_MESSAGE" ] || echo "$EQA_EXIT_MESSAGE"
+  return $rc
+}
+
+# eqa_config_get FILE KEY: a number or string value of KEY in a config JSON (as written by
+# `equiarm train --print-config`: one key per line; image_size, input_size, hidden and model are unique).
+eqa_config_get() {
+  sed -n "s/^ *\"$2\": *\"\{0,1\}\([^\",]*\)\"\{0,1\},\{0,1\} *\$/\1/p" "$1" | head -n 1
+}
+
+# eqa_wait_sims TIMEOUT_S LOGDIR SIM...: waits until every named sim process has exited; fails (1) on
+# a timeout, a sim's non-zero exit, or a policy_* / recorder process dying while sims still run.
+eqa_wait_sims() {
+  local timeout_s=$1 logs=$2 deadline=$(($1 + SECONDS)) s i rc ok=0 pending
+  shift 2
+  pending=("$@")
+  while [ ${#pending[@]} -gt 0 ]; do
+    local still=()
+    for s in "${pending[@]}"; do
+      if eqa_running "$s"; then
+        still+=("$s")
+      else
+        rc=0; eqa_exit_status "$s" || rc=$?
+        if [ $rc -eq 0 ]; then eqa_log "$s finished"
+        else eqa_log "$s exited with status $rc (log: $logs/$s.log)"; ok=1; fi
+      fi
+    done
+    pending=("${still[@]+"${still[@]}"}")
+    [ ${#pending[@]} -eq 0 ] && break
+    for i in "${!EQA_NAMES[@]}"; do
+      case ${EQA_NAMES[$i]} in
+        policy_*|recorder)
+          if ! eqa_group_alive "${EQA_PIDS[$i]}"; then
+            eqa_log "${EQA_NAMES[$i]} stopped while sims still run (log: $logs/${EQA_NAMES[$i]}.log):"
+            tail -n 5 "$logs/${EQA_NAMES[$i]}.log" >&2 || true
+            return 1
+          fi ;;
+      esac
+    done
+    if [ $SECONDS -ge $deadline ]; then
+      eqa_log "timeout after $timeout_s s: still running: ${pending[*]}"
+      return 1
+    fi
+    sleep 0.5
+  done
+  return $ok
+}

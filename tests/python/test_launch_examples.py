@@ -1,0 +1,327 @@
+"""Tests of the example scripts in launch_scripts/: drive_sim.py and read_bag.py against a real
+`equiarm sim` and `equiarm record`, and equiarm.launch.py with stub `launch`/`launch_ros` modules
+(no ROS 2 needed).
+
+    EQUIARM_BIN=target/debug/equiarm python -m pytest tests/python/test_launch_examples.py
+
+The DDS tests need the binary (env `EQUIARM_BIN`; they are skipped with a message when it is unset)
+and run in the network the test process is in, on a random ROS_DOMAIN_ID in 120..200 so that other
+DDS programs on this host are unlikely to share the domain (RustDDS has no way to keep traffic on one
+host, and this test does not create a network namespace: run pytest inside one, e.g. with
+`unshare -n` and multicast on lo as tests/run_all.sh does, to be sure nothing leaves the machine).
+"""
+
+import importlib.util
+import json
+import os
+import pathlib
+import random
+import signal
+import subprocess
+import sys
+import time
+import types
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+SCRIPTS = ROOT / "launch_scripts"
+BIN = os.environ.get("EQUIARM_BIN")
+
+needs_bin = pytest.mark.skipif(not BIN, reason="EQUIARM_BIN is not set: point it at a built `equiarm` "
+                                                "binary to run the DDS tests of launch_scripts/")
+
+
+def stop(proc, timeout=10):
+    """SIGINT, wait, then SIGKILL: never leaves the process running."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return proc.returncode
+
+
+@pytest.fixture(scope="module")
+def expert_session(tmp_path_factory):
+    """A recorder, one block_pulling sim in /env0 driven by drive_sim.py with the expert for two
+    episodes: (drive_sim's JSON lines, its exit status, the bag directory, the sim's exit status)."""
+    if not BIN:
+        pytest.skip("EQUIARM_BIN is not set")
+    pytest.importorskip("cyclonedds")
+    tmp = tmp_path_factory.mktemp("launch")
+    env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(120, 200)), RUST_LOG="warn")
+    bag = tmp / "bag"
+    procs = []
+    try:
+        rec = subprocess.Popen([BIN, "record", "--all", "-q", "-o", str(bag)], env=env,
+                               stdout=subprocess.DEVNULL, stderr=open(tmp / "record.log", "w"))
+        procs.append(rec)
+        time.sleep(1.0)
+        sim = subprocess.Popen([BIN, "sim", "--task", "block_pulling", "--namespace", "/env0", "--seed", "3",
+                                "--resolution", "64", "--episodes", "2"], env=env,
+                               stdout=subprocess.DEVNULL, stderr=open(tmp / "sim.log", "w"))
+        procs.append(sim)
+        drive = subprocess.run([sys.executable, str(SCRIPTS / "drive_sim.py"), "--namespace", "/env0",
+                                "--episodes", "2", "--json", "--timeout-s", "150"], env=env,
+                               capture_output=True, text=True, timeout=180)
+        sim_rc = sim.wait(30)
+        time.sleep(2.0)  # the recorder flushes every 250 ms; let the last samples arrive
+        assert stop(rec) == 0, (tmp / "record.log").read_text()[-2000:]
+        lines = [json.loads(line) for line in drive.stdout.splitlines() if line.startswith("{")]
+        return lines, drive.returncode, drive.stderr, bag, sim_rc
+    finally:
+        for p in procs:
+            stop(p)
+
+
+@needs_bin
+def test_drive_sim_expert_completes_two_episodes(expert_session):
+    lines, rc, stderr, _, sim_rc = expert_session
+    assert rc == 0, stderr[-2000:]
+    assert sim_rc == 0
+    episodes = [e for e in lines if e["event"] == "episode"]
+    steps = [e for e in lines if e["event"] == "step"]
+    assert len(episodes) == 2
+    assert [e["episode"] for e in episodes] == [0, 1]
+    assert all(e["env"] == "env0" and e["task"] == "block_pulling" and e["expert"] for e in episodes)
+    assert sum(e["success"] for e in episodes) >= 1
+    # one step line per Transition, each answered by the expert
+    assert len(steps) == sum(e["steps"] for e in episodes)
+    assert all(s["expert"] and s["source"] == 1 for s in steps)
+    assert lines[-1] == {"event": "done", "env": "env0", "episodes": 2,
+                         "successes": sum(e["success"] for e in episodes)}
+
+
+@needs_bin
+def test_read_bag_matches_the_run_and_bag_eval(expert_session):
+    pytest.importorskip("mcap_ros2")
+    lines, _, _, bag, _ = expert_session
+    out = subprocess.run([sys.executable, str(SCRIPTS / "read_bag.py"), str(bag), "--json"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    s = json.loads(out.stdout)
+    topics = s["topics"]
+    assert topics["/episodes"] == {"type": "equiarm_msgs/msg/EpisodeResult", "count": 2}
+    assert topics["/transitions"]["type"] == "equiarm_msgs/msg/Transition"
+    assert topics["/env0/gripper_cmd"]["type"] == "equiarm_msgs/msg/GripperCommand"
+    steps = [e for e in lines if e["event"] == "step"]
+    assert topics["/transitions"]["count"] == len(steps)
+    driven = [(e["episode"], e["steps"], e["success"]) for e in lines if e["event"] == "episode"]
+    assert [(e["episode"], e["steps"], e["success"]) for e in s["episodes"]] == driven
+    assert s["eval"]["episodes"] == 0 and s["train"]["episodes"] == 2
+    assert s["train"]["successes"] == sum(ok for _, _, ok in driven)
+    # the program's own evaluation of the same bag agrees
+    ev = json.loads(subprocess.run([BIN, "bag", "eval", str(bag), "--json"], capture_output=True, text=True,
+                                   timeout=60, check=True).stdout)
+    assert ev["episodes"] == 2
+    total = [g for g in ev["groups"] if g["env"] == "*"]
+    assert sum(g["successes"] for g in total) == s["train"]["successes"]
+    # and the human-readable form prints the table
+    text = subprocess.run([sys.executable, str(SCRIPTS / "read_bag.py"), str(bag)], capture_output=True,
+                          text=True, timeout=120, check=True).stdout
+    assert "/episodes" in text and "training:" in text and "env0" in text
+
+
+def test_read_bag_metadata_parser():
+    spec = importlib.util.spec_from_file_location("read_bag", SCRIPTS / "read_bag.py")
+    rb = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(rb)
+    meta = ("rosbag2_bagfile_information:\n  version: 8\n  storage_identifier: mcap\n"
+            "  relative_file_paths:\n    - run_0.mcap\n    - run_1.mcap\n  duration:\n    nanoseconds: 5\n")
+    assert rb.relative_file_paths(meta) == ["run_0.mcap", "run_1.mcap"]
+
+
+# --- equiarm.launch.py with stub `launch` / `launch_ros` modules ---------------------------------------
+
+class _Action:
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+
+def _stub_launch_modules():
+    class LaunchConfiguration:
+        def __init__(self, name, default=None):
+            self.name = name
+
+        def perform(self, context):
+            return context.launch_configurations[self.name]
+
+    class DeclareLaunchArgument(_Action):
+        def __init__(self, name, default_value=None, description=""):
+            super().__init__(name)
+            self.name, self.default_value = name, default_value
+
+    class LaunchDescription(_Action):
+        def __init__(self, entities=()):
+            super().__init__()
+            self.entities = list(entities)
+
+    mods = {name: types.ModuleType(name) for name in
+            ("launch", "launch.actions", "launch.substitutions", "launch_ros", "launch_ros.actions")}
+    mods["launch"].LaunchDescription = LaunchDescription
+    acts = mods["launch.actions"]
+    acts.DeclareLaunchArgument = DeclareLaunchArgument
+    for name in ("ExecuteProcess", "OpaqueFunction", "Shutdown", "RegisterEventHandler", "TimerAction",
+                 "SetEnvironmentVariable", "LogInfo", "GroupAction"):
+        setattr(acts, name, type(name, (_Action,), {}))
+    mods["launch.substitutions"].LaunchConfiguration = LaunchConfiguration
+    mods["launch_ros.actions"].Node = type("Node", (_Action,), {})
+    mods["launch"].actions, mods["launch"].substitutions = acts, mods["launch.substitutions"]
+    mods["launch_ros"].actions = mods["launch_ros.actions"]
+    return mods
+
+
+@pytest.fixture
+def launch_file(monkeypatch):
+    for name, mod in _stub_launch_modules().items():
+        monkeypatch.setitem(sys.modules, name, mod)
+    spec = importlib.util.spec_from_file_location("equiarm_launch", SCRIPTS / "equiarm.launch.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+
+    def processes(**overrides):
+        ld = mod.generate_launch_description()
+        declared = {e.name: e.default_value for e in ld.entities if type(e).__name__ == "DeclareLaunchArgument"}
+        unknown = set(overrides) - set(declared)
+        assert not unknown, f"not declared: {unknown}"
+        context = types.SimpleNamespace(launch_configurations={**declared, **overrides})
+        (opaque,) = [e for e in ld.entities if type(e).__name__ == "OpaqueFunction"]
+        actions = opaque.kwargs["function"](context)
+        assert all(type(a).__name__ == "ExecuteProcess" for a in actions)
+        return declared, {a.kwargs["name"]: a for a in actions}
+
+    return processes
+
+
+def _flag(cmd, name):
+    return cmd[cmd.index(name) + 1]
+
+
+def test_launch_file_declares_its_arguments(launch_file):
+    declared, _ = launch_file()
+    for name in ("task", "preset", "num_envs", "seed", "run_dir", "total_updates", "equiarm"):
+        assert name in declared
+    assert declared["equiarm"] == "equiarm" and declared["preset"] == "reduced"
+
+
+def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
+    _, procs = launch_file(task="block_picking", num_envs="3", seed="7", run_dir="runs/x", total_updates="40",
+                           equiarm="/opt/eq/equiarm")
+    cfg = json.loads((SCRIPTS / "configs" / "reduced_block_picking.json").read_text())
+    frame, image = cfg["image_size"], f"{cfg['image_size']}:{cfg['agent']['input_size']}"
+    assert sorted(procs) == sorted(["recorder", "trainer", "sim_env0", "policy_env0", "sim_env1", "policy_env1",
+                                    "sim_env2", "policy_env2", "sim_eval", "policy_eval"])
+    assert all(p.kwargs["cmd"][0] == "/opt/eq/equiarm" for p in procs.values())
+    assert procs["recorder"].kwargs["cmd"][1:] == ["record", "--all", "-q", "-o", os.path.join("runs/x", "bag")]
+    tr = procs["trainer"].kwargs["cmd"]
+    assert tr[1] == "train" and "--in-process" not in tr
+    assert (_flag(tr, "--preset"), _flag(tr, "--task"), _flag(tr, "--num-envs"), _flag(tr, "--seed"),
+            _flag(tr, "--run-dir"), _flag(tr, "--total-updates"), _flag(tr, "--eval-namespace")) == \
+        ("reduced", "block_picking", "3", "7", "runs/x", "40", "/eval")
+    assert "on_exit" in procs["trainer"].kwargs  # the launch ends with the trainer
+    for k, ns in enumerate(["/env0", "/env1", "/env2", "/eval"]):
+        name = ns.strip("/")
+        sim, pol = procs[f"sim_{name}"].kwargs["cmd"], procs[f"policy_{name}"].kwargs["cmd"]
+        seed = 7 + (1000 if ns == "/eval" else k)
+        assert sim[1] == "sim" and _flag(sim, "--namespace") == ns and _flag(sim, "--task") == "block_picking"
+        assert _flag(sim, "--seed") == str(seed) and _flag(sim, "--resolution") == str(frame)
+        assert pol[1] == "policy" and _flag(pol, "--namespace") == ns
+        assert _flag(pol, "--mode") == ("greedy" if ns == "/eval" else "sample")
+        assert _flag(pol, "--image") == image and _flag(pol, "--hidden") == str(cfg["agent"]["hidden"])
+        assert _flag(pol, "--model") == cfg["agent"]["model"]
+
+
+def test_launch_file_paper_preset_and_config_file(launch_file, tmp_path):
+    _, procs = launch_file(preset="paper", num_envs="1")
+    paper = json.loads((SCRIPTS / "configs" / "paper_block_pulling.json").read_text())
+    assert _flag(procs["policy_env0"].kwargs["cmd"], "--image") == \
+        f"{paper['image_size']}:{paper['agent']['input_size']}"
+    assert "--total-updates" not in procs["trainer"].kwargs["cmd"]
+    cfg = dict(paper, image_size=100, agent=dict(paper["agent"], input_size=90, hidden=8, model="cnn"))
+    f = tmp_path / "mine.json"
+    f.write_text(json.dumps(cfg))
+    _, procs = launch_file(config=str(f), num_envs="2", model="sen")
+    tr = procs["trainer"].kwargs["cmd"]
+    assert _flag(tr, "--config") == str(f) and "--preset" not in tr and _flag(tr, "--model") == "sen"
+    pol = procs["policy_env1"].kwargs["cmd"]
+    assert (_flag(pol, "--image"), _flag(pol, "--hidden"), _flag(pol, "--model")) == ("100:90", "8", "sen")
+    assert len([p for p in procs if p.startswith("sim_")]) == 3
+
+
+def test_launch_scripts_compile():
+    for name in ("equiarm.launch.py", "drive_sim.py", "read_bag.py"):
+        compile((SCRIPTS / name).read_text(), name, "exec")
+
+
+# --- demo.sh and eval.sh ------------------------------------------------------------------------------
+
+def _has_policy(binary):
+    return subprocess.run([binary, "policy", "--help"], capture_output=True, timeout=30).returncode == 0
+
+
+def _policy_shim(tmp_path):
+    """EQUIARM_BIN for the scripts: the real binary, except that while it has no `policy` subcommand,
+    `policy --mode expert|greedy` is emulated by drive_sim.py answering with the expert action."""
+    if _has_policy(BIN):
+        return BIN
+    shim = tmp_path / "equiarm"
+    shim.write_text(f"""#!/usr/bin/env bash
+if [ "$1" = policy ]; then
+  shift; ns=/env0
+  while [ $# -gt 0 ]; do case $1 in --namespace) ns=$2; shift 2 ;; *) shift ;; esac; done
+  exec {sys.executable} {SCRIPTS / 'drive_sim.py'} --namespace "$ns" --episodes 1000000 --quiet-steps --timeout-s 600
+fi
+exec {BIN} "$@"
+""")
+    shim.chmod(0o755)
+    return str(shim)
+
+
+def _leftovers(marker):
+    out = subprocess.run(["ps", "-eo", "pid=,args="], capture_output=True, text=True).stdout
+    return [line for line in out.splitlines() if marker in line and "ps -eo" not in line]
+
+
+@needs_bin
+def test_demo_sh_records_expert_episodes_and_leaves_nothing_running(tmp_path):
+    pytest.importorskip("cyclonedds")
+    pytest.importorskip("mcap_ros2")
+    out = tmp_path / "demo"
+    env = dict(os.environ, EQUIARM_BIN=_policy_shim(tmp_path), ROS_DOMAIN_ID=str(random.randint(120, 200)))
+    r = subprocess.run(["bash", str(SCRIPTS / "demo.sh"), "--num-envs", "2", "--episodes", "2", "--out", str(out)],
+                       env=env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert f"bag: {out / 'bag'}" in r.stdout
+    assert "4 episodes" in r.stdout  # equiarm bag eval's table
+    s = json.loads(subprocess.run([sys.executable, str(SCRIPTS / "read_bag.py"), str(out / "bag"), "--json"],
+                                  capture_output=True, text=True, timeout=120, check=True).stdout)
+    assert sorted((e["env"], e["episode"]) for e in s["episodes"]) == [("env0", 0), ("env0", 1), ("env1", 0), ("env1", 1)]
+    assert all(e["expert"] for e in s["episodes"]) and s["train"]["successes"] >= 2
+    assert not _leftovers(str(out)), _leftovers(str(out))
+
+
+def test_eval_sh_refuses_without_a_checkpoint(tmp_path):
+    r = subprocess.run(["bash", str(SCRIPTS / "eval.sh"), "--task", "block_pulling"], capture_output=True,
+                       text=True, timeout=30, env=dict(os.environ, EQUIARM_BIN="/bin/true"))
+    assert r.returncode == 2 and "--checkpoint" in r.stderr
+    r = subprocess.run(["bash", str(SCRIPTS / "eval.sh"), "--checkpoint", str(tmp_path / "none")],
+                       capture_output=True, text=True, timeout=30, env=dict(os.environ, EQUIARM_BIN="/bin/true"))
+    assert r.returncode == 2 and "does not exist" in r.stderr
+
+
+def test_multihost_sh_skips_without_root():
+    if os.geteuid() == 0 and not _can_drop_root():
+        pytest.skip("running as root without setpriv")
+    cmd = ["bash", str(SCRIPTS / "multihost.sh"), "--check-discovery"]
+    if os.geteuid() == 0:
+        cmd = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"] + cmd
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=30)
+    assert r.returncode == 0 and "skipped" in r.stdout, r.stdout + r.stderr
+
+
+def _can_drop_root():
+    import shutil
+    return shutil.which("setpriv") is not None
