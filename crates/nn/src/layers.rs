@@ -159,9 +159,18 @@ impl EquivariantConv {
                 row.push(Block { out_fields: ro.count, in_fields: ri.count, dim_out: b.dim_out, dim_in: b.dim_in, len: b.len });
                 solved.push(b);
             }
-            // He-like: each dense output channel gets squared norm ≈ 2 in expectation.
+            // He-like: each dense output channel gets squared norm ≈ 2 in expectation, divided
+            // by the kernel width.
+            // NOTE: He's rule assumes uncorrelated inputs; camera images and feature maps are
+            // smooth, and the band-limited basis (ring harmonics) sums neighbouring pixels with one
+            // sign, so plain He grew the activations ~2× per 3×3 layer (head outputs ~90 on rendered
+            // frames, saturating the actor's tanh so it could not learn); dividing by k² shrank
+            // them ~2× per layer. Dividing the squared norm by k keeps the pre-activation RMS
+            // within a small factor of the input's through all 8 layers (measured with
+            // `cargo run -p equiarm_sac --example init_scale`).
             let total: usize = row.iter().map(|b| b.in_fields * b.len).sum();
-            let std = if total > 0 { (2.0 * ro.rep.dim() as f64 / total as f64).sqrt() } else { 0.0 };
+            let width = kernel_size as f64;
+            let std = if total > 0 { (2.0 * ro.rep.dim() as f64 / total as f64 / width).sqrt() } else { 0.0 };
             for (b, s) in row.iter().zip(solved) {
                 if b.len == 0 {
                     continue;

@@ -370,7 +370,7 @@ pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Resu
 
 /// Run the expert in one env until `demo_episodes` episodes succeeded; store their transitions
 /// (expert = true). Returns (tried, kept).
-fn collect_demos(learner: &mut Learner, env_cfg: &EnvConfig) -> Result<(usize, usize), TrainError> {
+pub fn collect_demos(learner: &mut Learner, env_cfg: &EnvConfig) -> Result<(usize, usize), TrainError> {
     let cfg = learner.config().clone();
     let want = cfg.demo_episodes;
     let mut env = Env::new(env_cfg.clone())?;

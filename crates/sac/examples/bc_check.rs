@@ -1,0 +1,57 @@
+//! Diagnostic: how well the actor imitates the demos (set CENTER=1 for centre crops; prints the
+//! greedy action's squared error per dimension on the demos every 40 updates). Loads `demo_episodes` expert episodes into
+//! the replay and runs SAC updates on them alone, printing the expert L2 loss, with the config's
+//! expert weight (first argument: a multiplier, default 1).
+//!
+//! `cargo run -p equiarm_sac --example bc_check -- [WEIGHT] [UPDATES] [FRAME:INPUT] [HIDDEN] [MODEL]`
+use equiarm_sac::config::TrainConfig;
+use equiarm_sac::learner::Learner;
+
+fn main() {
+    let a: Vec<String> = std::env::args().skip(1).collect();
+    let w: f64 = a.first().and_then(|s| s.parse().ok()).unwrap_or(1.0);
+    let n: u64 = a.get(1).and_then(|s| s.parse().ok()).unwrap_or(200);
+    let mut cfg = TrainConfig::reduced("block_pulling");
+    if let Some((f, i)) = a.get(2).and_then(|s| s.split_once(':')) {
+        cfg.image_size = f.parse().unwrap();
+        cfg.agent.input_size = i.parse().unwrap();
+    }
+    if let Some(h) = a.get(3) {
+        cfg.agent.hidden = h.parse().unwrap();
+    }
+    if let Some(m) = a.get(4) {
+        cfg.agent.model = equiarm_sac::agent::ModelKind::parse(m).unwrap();
+    }
+    cfg.agent.expert_weight = w;
+    let mut l = Learner::new(cfg.clone()).unwrap();
+    let env_cfg = equiarm_sac::train::env_config(&cfg);
+    let (tried, kept) = equiarm_sac::train::collect_demos(&mut l, &env_cfg).unwrap();
+    println!("demos {kept}/{tried}, transitions {}", l.replay().len());
+    let n_t = l.replay().len();
+    let acts: Vec<[f32; 5]> = (0..n_t).filter_map(|i| l.replay().get(i).map(|t| t.action)).collect();
+    for d in 0..5 {
+        let m = acts.iter().map(|a| a[d] as f64).sum::<f64>() / acts.len() as f64;
+        let v = acts.iter().map(|a| (a[d] as f64 - m).powi(2)).sum::<f64>() / acts.len() as f64;
+        println!("dim {d}: mean {m:.3} var {v:.3}");
+    }
+    if std::env::var("CENTER").is_ok() {
+        l = { let mut c = cfg.clone(); c.augmentation = equiarm_sac::config::Augmentation::Center; let mut l2 = Learner::new(c).unwrap(); equiarm_sac::train::collect_demos(&mut l2, &env_cfg).unwrap(); l2 };
+    }
+    let greedy = |l: &mut Learner| {
+        let rows: Vec<(std::sync::Arc<equiarm_sac::frame::Frame>, [f32; 5])> = (0..l.replay().len()).filter_map(|i| l.replay().get(i).map(|t| (t.obs.clone(), t.action))).collect();
+        let frames: Vec<&equiarm_sac::frame::Frame> = rows.iter().map(|r| &*r.0).collect();
+        let acts = l.act(&frames, equiarm_sac::agent::ActMode::Greedy).unwrap();
+        let mut se = [0f64; 5];
+        for (a, r) in acts.iter().zip(&rows) { for d in 0..5 { se[d] += ((a[d] - r.1[d]) as f64).powi(2); } }
+        se.map(|x| (x / rows.len() as f64 * 1000.0).round() / 1000.0)
+    };
+    println!("greedy mse per dim before {:?}", greedy(&mut l));
+    for u in 1..=n {
+        let m = l.update().unwrap();
+        if u % 20 == 0 || u == 1 {
+            if u % 40 == 0 { println!("greedy mse per dim {:?}", greedy(&mut l)); }
+            println!("{u} expert {:.3} actor {:.3} q {:.3} qloss {:.3} entropy {:.1}", m.expert_loss, m.actor_loss, m.qf1_values, m.qf1_loss, m.entropy);
+        }
+    }
+}
+

@@ -1,0 +1,120 @@
+#!/usr/bin/env bash
+# The main job: the whole suite training on one task over DDS on this machine.
+#
+# Builds `equiarm` once (the optimised dev profile the tests use, in CARGO_TARGET_DIR, by default a
+# folder outside the clone shared with the test command), then starts, each in its own process group:
+#   - the recorder        equiarm record --all -o RUN/bag
+#   - the trainer         equiarm train (SAC + prioritised replay; weights out on /policy/weights)
+#   - N sim+policy pairs  /env0 … /envN-1 (the policy answers the first --demo-episodes episodes of
+#                         each env with the expert, then samples from the learned actor)
+#   - one eval pair       /eval (greedy policy; its episodes are the trainer's evaluations)
+# waits for the trainer to finish, stops every process cleanly (also on Ctrl-C: SIGINT, then
+# SIGKILL after 10 s), and prints the evaluation table and where the bag, checkpoints, metrics and
+# learning curve are.
+#
+# Options (defaults: the reduced CPU config of block pulling, 5 envs, seed 0):
+#   --task T            block_pulling | block_pushing | block_picking | drawer_opening | block_in_bowl
+#   --preset P          reduced (2-core CPU) | paper (PAPER_SPEC §2, for a GPU)
+#   --config FILE       a JSON run config (launch_scripts/configs/*.json); replaces the preset
+#   --num-envs N        sim+policy pairs (the paper uses 5)
+#   --seed S            base seed
+#   --run-dir DIR       where everything goes (default runs/<task>-<date>)
+#   --total-updates U   override the config's number of updates
+#   --no-record         do not record a bag
+#   -- ARGS...          passed on to `equiarm train`
+# Environment: ROS_DOMAIN_ID (default 0), ROS_LOCALHOST_ONLY (default 1: loopback only),
+# EQUIARM_BIN (use this binary instead of building), CARGO_TARGET_DIR.
+#
+# Example: bash launch_scripts/train.sh --task block_pulling --num-envs 5
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+task=block_pulling preset=reduced config="" num_envs=5 seed=0 run_dir="" total_updates="" record=1
+extra=()
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --task) task=$2; shift 2 ;;
+    --preset) preset=$2; shift 2 ;;
+    --config) config=$2; shift 2 ;;
+    --num-envs) num_envs=$2; shift 2 ;;
+    --seed) seed=$2; shift 2 ;;
+    --run-dir) run_dir=$2; shift 2 ;;
+    --total-updates) total_updates=$2; shift 2 ;;
+    --no-record) record=0; shift ;;
+    --) shift; extra=("$@"); break ;;
+    -h|--help) sed -n '2,30p' "$0"; exit 0 ;;
+    *) echo "train.sh: unknown option '$1' (see --help)" >&2; exit 2 ;;
+  esac
+done
+run_dir=${run_dir:-runs/$task-$(date +%Y%m%d-%H%M%S)}
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0}
+export ROS_LOCALHOST_ONLY=${ROS_LOCALHOST_ONLY:-1}
+export RUST_LOG=${RUST_LOG:-info}
+
+if [ -n "${EQUIARM_BIN:-}" ]; then
+  bin=$EQUIARM_BIN
+else
+  export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/equiarm/target}"
+  echo "== building equiarm (once; target dir $CARGO_TARGET_DIR)"
+  cargo build --locked --quiet --bin equiarm
+  bin=$CARGO_TARGET_DIR/debug/equiarm
+fi
+
+# The run config, resolved once and handed to every process.
+mkdir -p "$run_dir/logs"
+cfg_args=(--preset "$preset" --task "$task" --num-envs "$num_envs" --seed "$seed")
+[ -n "$config" ] && cfg_args+=(--config "$config")
+[ -n "$total_updates" ] && cfg_args+=(--total-updates "$total_updates")
+"$bin" train "${cfg_args[@]}" "${extra[@]}" --print-config > "$run_dir/config.json"
+cfg_get() { python3 -c "import json,sys; c=json.load(open(sys.argv[1])); print(eval('c' + sys.argv[2]))" "$run_dir/config.json" "$1"; }
+image=$(cfg_get "['image_size']"); input=$(cfg_get "['agent']['input_size']")
+hidden=$(cfg_get "['agent']['hidden']"); model=$(cfg_get "['agent']['model']")
+demos=$(cfg_get "['demo_episodes']")
+# demo episodes are spread over the envs (at least one each); unsuccessful ones are dropped
+per_env=$(( (demos + num_envs - 1) / num_envs ))
+arch=(--model "$model" --hidden "$hidden" --image "$image:$input")
+
+pids=()
+start() { # name, command...
+  local name=$1; shift
+  setsid "$@" > "$run_dir/logs/$name.log" 2>&1 &
+  pids+=($!)
+}
+stop_all() {
+  trap - EXIT INT TERM
+  local p
+  for p in "${pids[@]}"; do kill -INT -- "-$p" 2>/dev/null || true; done
+  for _ in $(seq 100); do
+    local alive=0
+    for p in "${pids[@]}"; do kill -0 "$p" 2>/dev/null && alive=1; done
+    [ $alive = 0 ] && break
+    sleep 0.1
+  done
+  for p in "${pids[@]}"; do kill -KILL -- "-$p" 2>/dev/null || true; done
+  wait 2>/dev/null || true
+}
+trap 'echo; echo "== stopping (interrupted)"; stop_all; exit 130' INT TERM
+trap stop_all EXIT
+
+echo "== run directory $run_dir (ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in $run_dir/logs)"
+[ $record = 1 ] && start recorder "$bin" record --all -q -o "$run_dir/bag"
+for i in $(seq 0 $((num_envs - 1))); do
+  start "sim$i" "$bin" sim --namespace "/env$i" --task "$task" --seed $((seed * 1000 + i)) --resolution "$image"
+  start "policy$i" "$bin" policy --namespace "/env$i" --mode sample "${arch[@]}" --seed $((seed * 1000 + i)) --expert-episodes "$per_env"
+done
+start sim_eval "$bin" sim --namespace /eval --task "$task" --seed $((seed * 1000 + 999)) --resolution "$image"
+start policy_eval "$bin" policy --namespace /eval --mode greedy "${arch[@]}" --seed $((seed * 1000 + 999))
+
+# The trainer runs in the foreground (its progress line on this terminal).
+set +e
+"$bin" train --config "$run_dir/config.json" --run-dir "$run_dir" --eval-namespace /eval 2> >(tee "$run_dir/logs/trainer.log" >&2)
+status=$?
+set -e
+echo "== training finished (exit $status); stopping the suite"
+stop_all
+if [ $record = 1 ] && [ -d "$run_dir/bag" ]; then
+  echo "== bag"
+  "$bin" bag info "$run_dir/bag" | head -20 || true
+fi
+echo "bag             $run_dir/bag"
+exit $status
