@@ -100,14 +100,14 @@ echo "== run directory $run_dir (ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in $run_dir/
 [ $record = 1 ] && start recorder "$bin" record --all -q -o "$run_dir/bag"
 for i in $(seq 0 $((num_envs - 1))); do
   start "sim$i" "$bin" sim --namespace "/env$i" --task "$task" --seed $((seed * 1000 + i)) --resolution "$image"
-  start "policy$i" "$bin" policy --namespace "/env$i" --mode sample "${arch[@]}" --seed $((seed * 1000 + i)) --expert-episodes "$per_env"
+  start "policy$i" "$bin" policy --namespace "/env$i" --mode sample "${arch[@]}" --seed $((seed * 1000 + i)) --expert-episodes "$per_env" --max-lead 10
 done
 start sim_eval "$bin" sim --namespace /eval --task "$task" --seed $((seed * 1000 + 999)) --resolution "$image"
 start policy_eval "$bin" policy --namespace /eval --mode greedy "${arch[@]}" --seed $((seed * 1000 + 999))
 
 # The trainer runs in the foreground (its progress line on this terminal).
 set +e
-"$bin" train --config "$run_dir/config.json" --run-dir "$run_dir" --eval-namespace /eval 2> >(tee "$run_dir/logs/trainer.log" >&2)
+"$bin" train --config "$run_dir/config.json" --run-dir "$run_dir" --eval-namespace /eval "${extra[@]}" 2> >(tee "$run_dir/logs/trainer.log" >&2)
 status=$?
 set -e
 echo "== training finished (exit $status); stopping the suite"

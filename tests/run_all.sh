@@ -34,5 +34,7 @@ netup='if command -v ip >/dev/null; then ip link set lo up; ip link set lo multi
 echo "== Rust tests"
 "${ns[@]}" bash -c "$netup; exec cargo test --locked --offline --workspace"
 echo "== Python tests"
-(cd tests/python && "$EQUIARM_PYTHON" -m pytest -q)
+# The launch-script examples drive real nodes over DDS: same private namespace, our binary.
+export EQUIARM_BIN="$CARGO_TARGET_DIR/debug/equiarm"
+"${ns[@]}" bash -c "$netup; cd tests/python && exec \"\$EQUIARM_PYTHON\" -m pytest -q"
 echo "== all tests passed in $(( $(date +%s) - start )) s"

@@ -15,14 +15,14 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context as _, bail};
-use equiarm_msgs::msg::{GripperCommand, Observation, PolicyWeights};
+use equiarm_msgs::msg::{GripperCommand, Observation, PolicyWeights, TrainerStatus};
 use equiarm_sac::agent::{ActMode, Agent, AgentConfig, ModelKind};
 use equiarm_sac::config::TrainConfig;
 use equiarm_sac::frame::Frame;
 use equiarm_sim::{Action, rng::Rng};
 use log::{info, warn};
 
-use crate::ros::{RosNode, RosOptions, Subscriber, qos, shutdown_signal};
+use crate::ros::{Publisher, RosNode, RosOptions, Subscriber, qos, shutdown_signal};
 
 /// How the node acts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -65,6 +65,16 @@ pub struct PolicyArgs {
     /// Topic of the trainer's weights.
     #[arg(long, default_value = "/policy/weights")]
     pub weights_topic: String,
+    /// Answer the first K episodes of the env with the expert's action (source EXPERT): the
+    /// demonstrations of PAPER_SPEC §2 (the trainer keeps only the successful ones).
+    #[arg(long, default_value_t = 0)]
+    pub expert_episodes: u32,
+    /// Flow control for the paper's update-to-data ratio: once the trainer has started updating,
+    /// act at most this many policy steps ahead of its update count (from /trainer/status);
+    /// 0 = no limit. With N envs and one update per N transitions, each env then makes about one
+    /// step per update, as in the paper's synchronous loop.
+    #[arg(long, default_value_t = 0)]
+    pub max_lead: u64,
     /// No latency lines.
     #[arg(long, short)]
     pub quiet: bool,
@@ -130,6 +140,8 @@ pub struct Policy {
     latencies: VecDeque<f64>,
     actions: u64,
     scratch: PathBuf,
+    expert_episodes: u32,
+    policy_steps: u64,
 }
 
 impl Policy {
@@ -147,7 +159,25 @@ impl Policy {
             _ => None,
         };
         let scratch = std::env::temp_dir().join(format!("equiarm-policy-{}-{seed}.safetensors", std::process::id()));
-        Ok(Policy { mode, agent, frame_size, rng: Rng::new(seed), last: None, version: 0, latencies: VecDeque::new(), actions: 0, scratch })
+        Ok(Policy { mode, agent, frame_size, rng: Rng::new(seed), last: None, version: 0, latencies: VecDeque::new(), actions: 0, scratch, expert_episodes: 0, policy_steps: 0 })
+    }
+
+    /// Answer episodes `0..k` of the env with the expert.
+    pub fn with_expert_episodes(mut self, k: u32) -> Self {
+        self.expert_episodes = k;
+        self
+    }
+
+    /// Whether `obs` would be answered by the learned or random policy (not by the expert, and
+    /// not a re-published seq), i.e. whether answering it counts against the flow-control lead.
+    pub fn is_policy_step(&self, obs: &Observation) -> bool {
+        let repeat = self.last.as_ref().is_some_and(|(seq, _)| *seq == obs.seq);
+        !repeat && self.mode != PolicyMode::Expert && obs.episode >= self.expert_episodes
+    }
+
+    /// Policy (non-expert) steps answered so far.
+    pub fn policy_steps(&self) -> u64 {
+        self.policy_steps
     }
 
     /// Whether this mode takes weights from the trainer.
@@ -167,7 +197,11 @@ impl Policy {
         {
             return Ok(cmd.clone());
         }
-        let (u, source) = match (self.mode, self.agent.as_mut()) {
+        let expert = obs.episode < self.expert_episodes;
+        if !expert && self.mode != PolicyMode::Expert {
+            self.policy_steps += 1;
+        }
+        let (u, source) = match (if expert { PolicyMode::Expert } else { self.mode }, self.agent.as_mut()) {
             (PolicyMode::Expert, _) => {
                 let source = GripperCommand::SOURCE_EXPERT;
                 return Ok(self.remember(GripperCommand { header: obs.header.clone(), obs_seq: obs.seq, source, ..obs.expert_action.clone() }));
@@ -243,11 +277,14 @@ impl Policy {
 /// Runs the node until SIGINT/SIGTERM; returns the commands sent.
 pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
     let (agent, frame, actor) = architecture(args)?;
-    let mut policy = Policy::new(args.mode, agent.clone(), frame, actor.as_deref(), args.seed)?;
+    let mut policy = Policy::new(args.mode, agent.clone(), frame, actor.as_deref(), args.seed)?.with_expert_episodes(args.expert_episodes);
     let mut node = RosNode::new(&args.namespace, "policy", opts)?;
     let obs_sub = node.subscription::<Observation>("observation", qos::command())?;
     let cmd_pub = node.publisher::<GripperCommand>("gripper_cmd", qos::command())?;
     let weights_sub = policy.learns().then(|| node.subscription::<PolicyWeights>(&args.weights_topic, qos::latched())).transpose()?;
+    let status_sub = (args.max_lead > 0).then(|| node.subscription::<TrainerStatus>("/trainer/status", qos::stream(10))).transpose()?;
+    // Flow control: an Observation held back until the trainer has caught up.
+    let (mut trainer_updates, mut held): (u64, Option<Observation>) = (0, None);
     let arch = if policy.learns() { format!(", {} hidden {} input {}", agent.model.name(), agent.hidden, agent.input_size) } else { String::new() };
     info!("{}: mode {:?}{arch}", node.name(), args.mode);
     let (mut sent, mut bad, mut refused) = (0u64, 0u64, HashSet::new());
@@ -256,20 +293,15 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
     loop {
         tokio::select! {
             s = &mut signal => { info!("{}: {} received, shutting down", node.name(), s?); break; }
+            r = recv_some(status_sub.as_ref()) => {
+                trainer_updates = r?.0.updates;
+                if let Some(obs) = held.take() {
+                    held = answer(&mut policy, obs, trainer_updates, args.max_lead, &cmd_pub, &mut sent, &mut bad).await;
+                }
+            }
             r = obs_sub.recv() => {
                 let (obs, _) = r?;
-                match policy.answer(&obs) {
-                    Ok(cmd) => match cmd_pub.publish(cmd).await {
-                        Ok(()) => sent += 1,
-                        Err(e) => warn!("{e:#}"),
-                    },
-                    Err(reason) => {
-                        bad += 1;
-                        if bad.is_power_of_two() {
-                            warn!("skipping Observation seq {} of '{}': {reason} ({bad} skipped so far)", obs.seq, obs.env);
-                        }
-                    }
-                }
+                held = answer(&mut policy, obs, trainer_updates, args.max_lead, &cmd_pub, &mut sent, &mut bad).await;
                 if let Some((median, p95)) = policy.latency_report().filter(|_| !args.quiet) {
                     info!("actor latency (batch 1, last 100): median {median:.2} ms, p95 {p95:.2} ms");
                 }
@@ -287,6 +319,27 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
     }
     info!("{}: sent {sent} commands, skipped {bad} observations, weights version {}", node.name(), policy.version());
     Ok(sent)
+}
+
+/// Answer `obs` unless flow control holds it back (then it is returned, to be answered when the
+/// trainer's update count has caught up; a re-publication by the sim replaces it).
+async fn answer(policy: &mut Policy, obs: Observation, trainer_updates: u64, max_lead: u64, cmd_pub: &Publisher<GripperCommand>, sent: &mut u64, bad: &mut u64) -> Option<Observation> {
+    if max_lead > 0 && trainer_updates > 0 && policy.is_policy_step(&obs) && policy.policy_steps() >= trainer_updates + max_lead {
+        return Some(obs);
+    }
+    match policy.answer(&obs) {
+        Ok(cmd) => match cmd_pub.publish(cmd).await {
+            Ok(()) => *sent += 1,
+            Err(e) => warn!("{e:#}"),
+        },
+        Err(reason) => {
+            *bad += 1;
+            if bad.is_power_of_two() {
+                warn!("skipping Observation seq {} of '{}': {reason} ({bad} skipped so far)", obs.seq, obs.env);
+            }
+        }
+    }
+    None
 }
 
 async fn recv_some<M: equiarm_msgs::RosMessage>(sub: Option<&Subscriber<M>>) -> anyhow::Result<(M, ros2_client::MessageInfo)> {
