@@ -44,15 +44,8 @@ resolution=${resolution:-$(eqa_config_get "$config" image_size)}
 out=${out:-runs/demo-$task-$(date +%Y%m%d-%H%M%S)}
 
 eqa_bin
-mkdir -p "$out/logs"
-bag="$out/bag"
-EQA_EXIT_MESSAGE="bag: $bag"
-trap eqa_on_exit EXIT
-trap 'exit 130' INT
-trap 'exit 143' TERM
-
-eqa_start recorder "$out/logs/record.log" "$EQUIARM_BIN" record --all -q -o "$bag"
-sleep 1  # let the recorder join the graph before the first episode starts
+eqa_recorded_run "$out"
+bag=$EQA_BAG
 sims=()
 for ((k = 0; k < num_envs; k++)); do
   eqa_start "policy_env$k" "$out/logs/policy_env$k.log" \

@@ -54,15 +54,8 @@ model=${model:-$(eqa_config_get "$config" model)}
 out=${out:-runs/eval-$task-$(date +%Y%m%d-%H%M%S)}
 
 eqa_bin
-mkdir -p "$out/logs"
-bag="$out/bag"
-EQA_EXIT_MESSAGE="bag: $bag"
-trap eqa_on_exit EXIT
-trap 'exit 130' INT
-trap 'exit 143' TERM
-
-eqa_start recorder "$out/logs/record.log" "$EQUIARM_BIN" record --all -q -o "$bag"
-sleep 1  # let the recorder join the graph before the first episode starts
+eqa_recorded_run "$out"
+bag=$EQA_BAG
 eqa_start policy_eval "$out/logs/policy_eval.log" \
   "$EQUIARM_BIN" policy --namespace /eval --mode greedy --checkpoint "$checkpoint" \
   --model "$model" --hidden "$hidden" --image "$frame:$input" --seed "$seed"

@@ -120,6 +120,19 @@ eqa_on_exit() {
   return $rc
 }
 
+# eqa_recorded_run OUT: creates OUT/logs, sets EQA_BAG=OUT/bag (printed at exit), installs the exit
+# and signal traps, starts the recorder of every topic and gives it a second to join the graph.
+eqa_recorded_run() {
+  mkdir -p "$1/logs"
+  EQA_BAG="$1/bag"
+  EQA_EXIT_MESSAGE="bag: $EQA_BAG"
+  trap eqa_on_exit EXIT
+  trap 'exit 130' INT
+  trap 'exit 143' TERM
+  eqa_start recorder "$1/logs/record.log" "$EQUIARM_BIN" record --all -q -o "$EQA_BAG"
+  sleep 1
+}
+
 # eqa_config_get FILE KEY: a number or string value of KEY in a config JSON (as written by
 # `equiarm train --print-config`: one key per line; image_size, input_size, hidden and model are unique).
 eqa_config_get() {

@@ -51,53 +51,31 @@ export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0}
 export ROS_LOCALHOST_ONLY=${ROS_LOCALHOST_ONLY:-1}
 export RUST_LOG=${RUST_LOG:-info}
 
-if [ -n "${EQUIARM_BIN:-}" ]; then
-  bin=$EQUIARM_BIN
-else
-  export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/equiarm/target}"
-  echo "== building equiarm (once; target dir $CARGO_TARGET_DIR)"
-  cargo build --locked --quiet --bin equiarm
-  bin=$CARGO_TARGET_DIR/debug/equiarm
-fi
+source launch_scripts/lib.sh
+eqa_bin
+bin=$EQUIARM_BIN
 
 # The run config, resolved once and handed to every process.
-mkdir -p "$run_dir/logs"
+mkdir -p "$run_dir"
 cfg_args=(--preset "$preset" --task "$task" --num-envs "$num_envs" --seed "$seed")
 [ -n "$config" ] && cfg_args+=(--config "$config")
 [ -n "$total_updates" ] && cfg_args+=(--total-updates "$total_updates")
 "$bin" train "${cfg_args[@]}" "${extra[@]}" --print-config > "$run_dir/config.json"
-cfg_get() { python3 -c "import json,sys; c=json.load(open(sys.argv[1])); print(eval('c' + sys.argv[2]))" "$run_dir/config.json" "$1"; }
-image=$(cfg_get "['image_size']"); input=$(cfg_get "['agent']['input_size']")
-hidden=$(cfg_get "['agent']['hidden']"); model=$(cfg_get "['agent']['model']")
-demos=$(cfg_get "['demo_episodes']")
+cfg_get() { eqa_config_get "$run_dir/config.json" "$1"; }
+image=$(cfg_get image_size) input=$(cfg_get input_size) hidden=$(cfg_get hidden) model=$(cfg_get model)
+demos=$(cfg_get demo_episodes)
 # demo episodes are spread over the envs (at least one each); unsuccessful ones are dropped
 per_env=$(( (demos + num_envs - 1) / num_envs ))
 arch=(--model "$model" --hidden "$hidden" --image "$image:$input")
 
-pids=()
-start() { # name, command...
-  local name=$1; shift
-  setsid "$@" > "$run_dir/logs/$name.log" 2>&1 &
-  pids+=($!)
-}
-stop_all() {
-  trap - EXIT INT TERM
-  local p
-  for p in "${pids[@]}"; do kill -INT -- "-$p" 2>/dev/null || true; done
-  for _ in $(seq 100); do
-    local alive=0
-    for p in "${pids[@]}"; do kill -0 "$p" 2>/dev/null && alive=1; done
-    [ $alive = 0 ] && break
-    sleep 0.1
-  done
-  for p in "${pids[@]}"; do kill -KILL -- "-$p" 2>/dev/null || true; done
-  wait 2>/dev/null || true
-}
-trap 'echo; echo "== stopping (interrupted)"; stop_all; exit 130' INT TERM
-trap stop_all EXIT
-
+start() { eqa_start "$1" "$run_dir/logs/$1.log" "${@:2}"; }
 echo "== run directory $run_dir (ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in $run_dir/logs)"
-[ $record = 1 ] && start recorder "$bin" record --all -q -o "$run_dir/bag"
+if [ $record = 1 ]; then
+  eqa_recorded_run "$run_dir"
+else
+  mkdir -p "$run_dir/logs"
+  trap eqa_on_exit EXIT; trap 'exit 130' INT; trap 'exit 143' TERM
+fi
 for i in $(seq 0 $((num_envs - 1))); do
   start "sim$i" "$bin" sim --namespace "/env$i" --task "$task" --seed $((seed * 1000 + i)) --resolution "$image"
   start "policy$i" "$bin" policy --namespace "/env$i" --mode sample "${arch[@]}" --seed $((seed * 1000 + i)) --expert-episodes "$per_env" --max-lead 10
@@ -111,10 +89,9 @@ set +e
 status=$?
 set -e
 echo "== training finished (exit $status); stopping the suite"
-stop_all
+eqa_stop_all
 if [ $record = 1 ] && [ -d "$run_dir/bag" ]; then
   echo "== bag"
   "$bin" bag info "$run_dir/bag" | head -20 || true
 fi
-echo "bag             $run_dir/bag"
 exit $status

@@ -56,7 +56,11 @@ def expert_session(tmp_path_factory):
     bag = tmp / "bag"
     procs = []
     try:
-        rec = subprocess.Popen([BIN, "record", "--all", "-q", "-o", str(bag)], env=env,
+        # Explicit topics, so the recorder subscribes before the sim starts (`--all` looks for new
+        # topics once a second and can miss a short first episode).
+        topics = ["/episodes:equiarm_msgs/msg/EpisodeResult", "/transitions:equiarm_msgs/msg/Transition",
+                  "/env0/gripper_cmd:equiarm_msgs/msg/GripperCommand", "/env0/observation:equiarm_msgs/msg/Observation"]
+        rec = subprocess.Popen([BIN, "record", "-q", "-o", str(bag), *topics], env=env,
                                stdout=subprocess.DEVNULL, stderr=open(tmp / "record.log", "w"))
         procs.append(rec)
         time.sleep(1.0)
