@@ -49,7 +49,7 @@ done
 run_dir=${run_dir:-runs/$task-$(date +%Y%m%d-%H%M%S)}
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0}
 export ROS_LOCALHOST_ONLY=${ROS_LOCALHOST_ONLY:-1}
-export RUST_LOG=${RUST_LOG:-info}
+export RUST_LOG=${RUST_LOG:-warn,equiarm=info,equiarm_nodes=info}
 
 source launch_scripts/lib.sh
 eqa_bin

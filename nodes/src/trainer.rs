@@ -165,9 +165,14 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
                         }
                     }
                 }
+                // Evaluations as in the paper: the eval pair's episodes that end once the update
+                // count has reached the next multiple of eval_every; the ones in between are dropped.
                 Err(r) if r.eval || ingest.is_eval(&r.env) => {
-                    pending_eval.push(r);
-                    if pending_eval.len() >= cfg.eval_episodes.max(1) {
+                    let due = cfg.eval_every > 0 && known.0 >= (st.evals.last().map_or(0, |e| e.updates) / cfg.eval_every + 1) * cfg.eval_every;
+                    if due {
+                        pending_eval.push(r);
+                    }
+                    if due && pending_eval.len() >= cfg.eval_episodes.max(1) {
                         let e = evaluation(&pending_eval, known.0);
                         pending_eval.clear();
                         let named = [("eval/success_rate", e.success_rate), ("eval/discounted_return", e.discounted_return), ("eval/episodic_return", e.mean_return), ("eval/episodic_length", e.mean_length), ("eval/updates", e.updates as f64)];
