@@ -75,6 +75,10 @@ pub struct PolicyArgs {
     /// step per update, as in the paper's synchronous loop.
     #[arg(long, default_value_t = 0)]
     pub max_lead: u64,
+    /// With --max-lead: policy steps allowed per trainer update (1 for training envs; an eval env
+    /// needs about eval_episodes × episode length / eval_every).
+    #[arg(long, default_value_t = 1)]
+    pub steps_per_update: u64,
     /// No latency lines.
     #[arg(long, short)]
     pub quiet: bool,
@@ -284,7 +288,8 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
     let weights_sub = policy.learns().then(|| node.subscription::<PolicyWeights>(&args.weights_topic, qos::latched())).transpose()?;
     let status_sub = (args.max_lead > 0).then(|| node.subscription::<TrainerStatus>("/trainer/status", qos::stream(10))).transpose()?;
     // Flow control: an Observation held back until the trainer has caught up.
-    let (mut trainer_updates, mut held): (u64, Option<Observation>) = (0, None);
+    let (mut trainer_updates, mut held): (Option<u64>, Option<Observation>) = (None, None);
+    let lead = (args.max_lead > 0).then_some((args.max_lead, args.steps_per_update));
     let arch = if policy.learns() { format!(", {} hidden {} input {}", agent.model.name(), agent.hidden, agent.input_size) } else { String::new() };
     info!("{}: mode {:?}{arch}", node.name(), args.mode);
     let (mut sent, mut bad, mut refused) = (0u64, 0u64, HashSet::new());
@@ -294,14 +299,14 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
         tokio::select! {
             s = &mut signal => { info!("{}: {} received, shutting down", node.name(), s?); break; }
             r = recv_some(status_sub.as_ref()) => {
-                trainer_updates = r?.0.updates;
+                trainer_updates = Some(r?.0.updates);
                 if let Some(obs) = held.take() {
-                    held = answer(&mut policy, obs, trainer_updates, args.max_lead, &cmd_pub, &mut sent, &mut bad).await;
+                    held = answer(&mut policy, obs, trainer_updates, lead, &cmd_pub, &mut sent, &mut bad).await;
                 }
             }
             r = obs_sub.recv() => {
                 let (obs, _) = r?;
-                held = answer(&mut policy, obs, trainer_updates, args.max_lead, &cmd_pub, &mut sent, &mut bad).await;
+                held = answer(&mut policy, obs, trainer_updates, lead, &cmd_pub, &mut sent, &mut bad).await;
                 if let Some((median, p95)) = policy.latency_report().filter(|_| !args.quiet) {
                     info!("actor latency (batch 1, last 100): median {median:.2} ms, p95 {p95:.2} ms");
                 }
@@ -322,9 +327,13 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
 }
 
 /// Answer `obs` unless flow control holds it back (then it is returned, to be answered when the
-/// trainer's update count has caught up; a re-publication by the sim replaces it).
-async fn answer(policy: &mut Policy, obs: Observation, trainer_updates: u64, max_lead: u64, cmd_pub: &Publisher<GripperCommand>, sent: &mut u64, bad: &mut u64) -> Option<Observation> {
-    if max_lead > 0 && trainer_updates > 0 && policy.is_policy_step(&obs) && policy.policy_steps() >= trainer_updates + max_lead {
+/// trainer's update count has caught up; a re-publication by the sim replaces it). The limit applies
+/// once a TrainerStatus has been seen: `steps ≤ steps_per_update × updates + max_lead`.
+async fn answer(policy: &mut Policy, obs: Observation, trainer_updates: Option<u64>, lead: Option<(u64, u64)>, cmd_pub: &Publisher<GripperCommand>, sent: &mut u64, bad: &mut u64) -> Option<Observation> {
+    if let (Some(u), Some((max_lead, per))) = (trainer_updates, lead)
+        && policy.is_policy_step(&obs)
+        && policy.policy_steps() >= per * u + max_lead
+    {
         return Some(obs);
     }
     match policy.answer(&obs) {
