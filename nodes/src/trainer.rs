@@ -254,6 +254,8 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
         last_ck = Some(checkpoint(&learner, &st, &dir)?);
     }
     write_json(&dir.join("evals.json"), &st.evals).map_err(anyhow::Error::msg)?;
+    // The curve is redrawn at every evaluation; draw it at the end too (a run may end before one).
+    write_curve(&dir, &cfg, &st.evals)?;
     let _ = std::fs::remove_file(&scratch);
     let c = &ingest.counts;
     info!("received {} transitions (stored {}, expert held {}, eval {})", c.transitions, c.stored, c.expert_held, c.eval);
