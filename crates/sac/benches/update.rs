@@ -1,6 +1,6 @@
 //! Benchmark: one SAC update (critic → actor → α → target, PAPER_SPEC §2) on random batches, for
 //! each network family at the paper size (hidden 64, 128 px, batch 128) and at the reduced CPU
-//! config, medians of `--reps` updates after one warm-up, plus the batch-1 greedy action time.
+//! config (`TrainConfig::reduced`: hidden 8, 32 px, batch 64), medians of `--reps` updates after one warm-up, plus the batch-1 greedy action time.
 //! Prints a table, one `csv,` line per case and the peak RSS.
 //!
 //! `cargo bench -p equiarm_sac --bench update -- [--reps N] [--config paper|reduced|all]
@@ -66,10 +66,10 @@ fn main() {
     println!("model  config   batch  px   update s (median of {reps})   act b1 s");
     for cfg_name in &configs {
         for &model in &models {
-            let (hidden, s, b) = match *cfg_name {
-                "paper" => (if model == ModelKind::Sen { 32 } else { 64 }, 128, 128),
-                _ => (16, 64, 64),
-            };
+            // The presets of `TrainConfig` (SEN's paper hidden size is 32).
+            let preset = equiarm_sac::config::TrainConfig::preset(cfg_name, "block_pulling").expect("preset");
+            let hidden = if model == ModelKind::Sen && *cfg_name == "paper" { 32 } else { preset.agent.hidden };
+            let (s, b) = (preset.agent.input_size, preset.batch_size);
             let b = batch_override.unwrap_or(b);
             let hidden = arg(&args, "--hidden").and_then(|v| v.parse().ok()).unwrap_or(hidden);
             let s = arg(&args, "--px").and_then(|v| v.parse().ok()).unwrap_or(s);
