@@ -18,7 +18,7 @@ cargo build --locked --workspace --all-targets
 cargo test --locked --workspace --no-run
 echo "== docs"
 # the message docs (every field with its unit) and the libraries; --no-deps keeps it to our crates
-RUSTDOCFLAGS="-D warnings" cargo doc --locked --no-deps --quiet -p equiarm_msgs -p equiarm_bag -p equiarm_nodes
+RUSTDOCFLAGS="-D warnings" cargo doc --locked --no-deps --quiet -p equiarm_msgs -p equiarm_bag -p equiarm_nodes -p equiarm_sac
 
 # A private network namespace: as root (CI) or through an unprivileged user namespace.
 ns=()

@@ -25,7 +25,7 @@ fn main() {
     }
     let refs: Vec<&equiarm_sac::frame::Frame> = frames.iter().map(|f| &**f).collect();
     let c = equiarm_sac::augment::center_offset(frame, input);
-    let x = equiarm_sac::augment::network_input(&refs, &vec![(c, c); 8], input).unwrap();
+    let x = equiarm_sac::augment::network_input(&refs, &[(c, c); 8], input).unwrap();
     let dev = Device::flex();
     let mut t = Tensor::<4>::from_data(TensorData::new(x, [8, 5, input, input]), &dev);
     let net = NetConfig { hidden, input_size: input, in_channels: 5 };
@@ -40,7 +40,7 @@ fn main() {
     }
     let y = actor.head.forward(t);
     println!("head mean/rms {:?}", stats(&y));
-    let x2 = equiarm_sac::augment::network_input(&refs, &vec![(c, c); 8], input).unwrap();
+    let x2 = equiarm_sac::augment::network_input(&refs, &[(c, c); 8], input).unwrap();
     let (m, ls) = actor.forward(Tensor::from_data(TensorData::new(x2, [8, 5, input, input]), &dev));
     println!("mean {:?}", m.into_data().try_into_vec::<f32>().unwrap()[..10].to_vec());
     println!("log_std {:?}", ls.into_data().try_into_vec::<f32>().unwrap()[..5].to_vec());

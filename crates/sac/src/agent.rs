@@ -580,7 +580,9 @@ fn scalar(t: Tensor<1>) -> f32 {
     t.into_data().convert::<f32>().try_into_vec::<f32>().ok().and_then(|v| v.first().copied()).unwrap_or(f32::NAN)
 }
 
-/// A SAC agent of any [`ModelKind`].
+/// A SAC agent of any [`ModelKind`] (one per process: the size difference between the variants'
+/// inline state does not matter, the tensors live on the heap).
+#[allow(clippy::large_enum_variant)]
 pub enum Agent {
     /// Equivariant (D4).
     Equi(Sac<EquiActor, EquiCritic>),

@@ -167,7 +167,7 @@ impl TrainConfig {
         if self.image_size < s {
             return err("image_size", format!("{} is smaller than the network input {s}", self.image_size));
         }
-        if self.agent.hidden == 0 || self.agent.hidden % 8 != 0 {
+        if self.agent.hidden == 0 || !self.agent.hidden.is_multiple_of(8) {
             return err("agent.hidden", format!("{} must be a positive multiple of 8", self.agent.hidden));
         }
         if !(self.agent.lr > 0.0 && self.agent.lr.is_finite()) {
@@ -176,7 +176,7 @@ impl TrainConfig {
         if !(0.0..=1.0).contains(&self.agent.gamma) || !(0.0..=1.0).contains(&self.agent.tau) {
             return err("agent.gamma", "gamma and tau must be in [0, 1]".into());
         }
-        if !(self.agent.init_alpha > 0.0) {
+        if self.agent.init_alpha.is_nan() || self.agent.init_alpha <= 0.0 {
             return err("agent.init_alpha", format!("{} must be positive", self.agent.init_alpha));
         }
         if let Augmentation::Drq { k, m } = self.augmentation

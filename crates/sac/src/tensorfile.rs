@@ -56,7 +56,7 @@ pub fn write(path: &Path, tensors: &[(String, Vec<usize>, Vec<f32>)], meta: &[(S
     std::fs::rename(&tmp, path)
 }
 
-/// Read a file written by [`write`] (or any safetensors file of F32 tensors).
+/// Read a file written by [`write()`] (or any safetensors file of F32 tensors).
 pub fn read(path: &Path) -> Result<TensorFile, ReadError> {
     let bytes = std::fs::read(path).map_err(ReadError::Io)?;
     let bad = |m: &str| ReadError::Format(m.to_string());

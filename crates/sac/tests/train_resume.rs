@@ -65,10 +65,10 @@ fn k_updates_straight_equal_half_checkpoint_resume_half() {
     // A checkpoint of another config is refused, naming the differing field.
     let mut other = tiny();
     other.batch_size = 4;
-    let e = run(other, &RunOptions { run_dir: scratch("other"), resume: Some(b.clone()), ..Default::default() }, &never)
-        .err()
-        .expect("config mismatch must fail")
-        .to_string();
+    let e = match run(other, &RunOptions { run_dir: scratch("other"), resume: Some(b.clone()), ..Default::default() }, &never) {
+        Ok(_) => panic!("config mismatch must fail"),
+        Err(e) => e.to_string(),
+    };
     assert!(e.contains("batch_size"), "{e}");
     for d in [straight_dir, split_dir, scratch("other")] {
         let _ = std::fs::remove_dir_all(d);
