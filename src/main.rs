@@ -140,14 +140,17 @@ enum BagCommand {
         /// Print JSON instead of a table.
         #[arg(long)]
         json: bool,
-        /// Instead of episode metrics: run this actor checkpoint (safetensors) over the recorded
-        /// Transitions and report its agreement with the recorded actions per dimension.
+        /// Instead of episode metrics: run this actor over the recorded Transitions and report its
+        /// agreement with the recorded actions per dimension. A checkpoint or run directory (its
+        /// latest checkpoint) gives the architecture from its manifest; an actor .safetensors
+        /// file needs --net and --config.
         #[arg(long, value_name = "CKPT")]
         policy: Option<std::path::PathBuf>,
         /// The checkpoint's network: equi or cnn.
         #[arg(long, default_value = "equi")]
         net: String,
-        /// The checkpoint's architecture: paper (hidden 64, 128 px) or reduced (hidden 16, 64 px).
+        /// An actor file's architecture: paper (hidden 64, 128 px) or reduced (the networks
+        /// crate's reduced size: hidden 16, 64 px).
         #[arg(long, default_value = "paper")]
         config: String,
     },
@@ -334,10 +337,20 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             print!("{}", equiarm_nodes::bag_tools::info_text(&bag, &info));
         }
         Command::Bag(BagCommand::Eval { bag, policy: Some(ckpt), net, config, json, .. }) => {
-            let cfg = match config.as_str() {
-                "paper" => equiarm_nn::nets::NetConfig::paper(),
-                "reduced" => equiarm_nn::nets::NetConfig::reduced_cpu(),
-                other => bail!("unknown --config '{other}': use paper or reduced"),
+            // A checkpoint or run directory names its architecture in its manifest.
+            let (ckpt, net, cfg) = if ckpt.is_dir() {
+                let dir = equiarm_sac::train::find_checkpoint(&ckpt)?;
+                let m = equiarm_sac::learner::read_manifest(&dir)?;
+                let a = &m.config.agent;
+                let cfg = equiarm_nn::nets::NetConfig { hidden: a.hidden, input_size: a.input_size, in_channels: 5 };
+                (dir.join("actor.safetensors"), a.model.name().to_string(), cfg)
+            } else {
+                let cfg = match config.as_str() {
+                    "paper" => equiarm_nn::nets::NetConfig::paper(),
+                    "reduced" => equiarm_nn::nets::NetConfig::reduced_cpu(),
+                    other => bail!("unknown --config '{other}': use paper or reduced"),
+                };
+                (ckpt, net, cfg)
             };
             let a = equiarm_nodes::policy_eval::evaluate(&bag, &ckpt, &net, &cfg)
                 .with_context(|| format!("evaluating {} on {}", ckpt.display(), bag.display()))?;

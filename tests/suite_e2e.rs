@@ -82,6 +82,11 @@ fn train_sh_runs_the_suite_to_the_end() {
     assert!(run_dir.join("checkpoints/latest").is_file());
     assert!(run_dir.join("learning_curve.png").is_file());
     bag_opens(&run_dir.join("bag"));
+    // The trained actor over the recorded transitions, its architecture from the run's manifest.
+    let ev = Command::new(bin()).args(["bag", "eval", "--json", "--policy"]).arg(&run_dir).arg(run_dir.join("bag")).output().unwrap();
+    assert!(ev.status.success(), "bag eval --policy RUN_DIR failed: {}", String::from_utf8_lossy(&ev.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&ev.stdout).expect("JSON");
+    assert!(v["transitions"].as_u64().unwrap_or(0) > 0 && v["dims"].as_array().map_or(0, |d| d.len()) == 5, "{v}");
     std::thread::sleep(Duration::from_millis(500));
     assert!(survivors(105).is_empty(), "left running: {:?}", survivors(105));
 }
