@@ -129,7 +129,10 @@ eqa_recorded_run() {
   trap eqa_on_exit EXIT
   trap 'exit 130' INT
   trap 'exit 143' TERM
-  eqa_start recorder "$1/logs/record.log" "$EQUIARM_BIN" record --all -q -o "$EQA_BAG"
+  # /episodes and /transitions by name, so they are subscribed from the start (`--all` looks for
+  # new topics once a second and can miss a short first episode); everything else through --all.
+  eqa_start recorder "$1/logs/record.log" "$EQUIARM_BIN" record --all -q -o "$EQA_BAG" \
+    /episodes:equiarm_msgs/msg/EpisodeResult /transitions:equiarm_msgs/msg/Transition
   sleep 1
 }
 
