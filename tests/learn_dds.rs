@@ -286,8 +286,7 @@ fn the_trainer_stores_each_frame_once_keeps_only_successful_demos_and_never_the_
 fn the_policy_refuses_foreign_weights_and_answers_a_repeated_seq_identically() {
     let arch = AgentConfig { model: ModelKind::Equi, hidden: 8, input_size: 16, ..AgentConfig::default() };
     let mut policy = Policy::new(PolicyMode::Sample, arch.clone(), SIZE as usize, None, 7).unwrap();
-    let scratch = support::scratch("learn_dds_weights").join("actor.safetensors");
-    let data = Agent::new(arch, 99).unwrap().actor_bytes(&scratch).unwrap();
+    let data = Agent::new(arch, 99).unwrap().actor_bytes().unwrap();
     let weights = |version, model: &str, format: &str, data: Vec<u8>| PolicyWeights { version, updates: 3, model: model.into(), format: format.into(), data, ..Default::default() };
 
     let o = policy.on_weights(&weights(5, "cnn", "safetensors", data.clone()));

@@ -143,7 +143,6 @@ pub struct Policy {
     version: u64,
     latencies: VecDeque<f64>,
     actions: u64,
-    scratch: PathBuf,
     expert_episodes: u32,
     policy_steps: u64,
 }
@@ -162,8 +161,7 @@ impl Policy {
             }
             _ => None,
         };
-        let scratch = std::env::temp_dir().join(format!("equiarm-policy-{}-{seed}.safetensors", std::process::id()));
-        Ok(Policy { mode, agent, frame_size, rng: Rng::new(seed), last: None, version: 0, latencies: VecDeque::new(), actions: 0, scratch, expert_episodes: 0, policy_steps: 0 })
+        Ok(Policy { mode, agent, frame_size, rng: Rng::new(seed), last: None, version: 0, latencies: VecDeque::new(), actions: 0, expert_episodes: 0, policy_steps: 0 })
     }
 
     /// Answer episodes `0..k` of the env with the expert.
@@ -264,11 +262,8 @@ impl Policy {
         if w.version <= self.version {
             return WeightsOutcome::Stale;
         }
-        let loaded = std::fs::write(&self.scratch, &w.data)
-            .map_err(|e| format!("{}: {e}", self.scratch.display()))
-            .and_then(|_| agent.load_actor(&self.scratch).map_err(|e| e.to_string()));
-        let _ = std::fs::remove_file(&self.scratch);
-        match loaded {
+        let label = format!("PolicyWeights version {}", w.version);
+        match agent.load_actor_bytes(w.data.clone(), &label).map_err(|e| e.to_string()) {
             Ok(()) => {
                 self.version = w.version;
                 WeightsOutcome::Loaded

@@ -177,18 +177,18 @@ pub fn stop_flag() -> Arc<AtomicBool> {
             }
         };
         rt.block_on(async {
-            use tokio::signal::unix::{SignalKind, signal};
-            let (Ok(mut term), Ok(mut int)) = (signal(SignalKind::terminate()), signal(SignalKind::interrupt())) else {
-                log::warn!("could not install the SIGINT/SIGTERM handlers");
+            // The first poll installs the handlers; only then is the flag armed.
+            let signal = crate::ros::shutdown_signal();
+            tokio::pin!(signal);
+            if let std::task::Poll::Ready(r) = futures::poll!(&mut signal) {
+                log::warn!("no SIGINT/SIGTERM handler: {r:?}");
                 return;
-            };
+            }
             let _ = tx.send(());
-            let sig = tokio::select! {
-                _ = term.recv() => "SIGTERM",
-                _ = int.recv() => "SIGINT",
-            };
-            log::info!("{sig}: stopping after the current step and writing a checkpoint");
-            flag.store(true, Ordering::Relaxed);
+            if let Ok(sig) = signal.await {
+                log::info!("{sig}: stopping after the current step and writing a checkpoint");
+                flag.store(true, Ordering::Relaxed);
+            }
         });
     });
     let _ = rx.recv_timeout(std::time::Duration::from_secs(1));

@@ -89,7 +89,6 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     let ep_sub = node.subscription::<EpisodeResult>("/episodes", qos::stream(100))?;
     let weights_pub = node.publisher::<PolicyWeights>("/policy/weights", qos::latched())?;
     let status_pub = node.publisher::<TrainerStatus>("/trainer/status", qos::stream(10))?;
-    let scratch = std::env::temp_dir().join(format!("equiarm-trainer-{}.safetensors", std::process::id()));
     let mut ingest = Ingest::new(&cfg, &args.eval_namespace);
     let (mut owed, mut since, mut pending_eval, mut queue) = (0u64, 0usize, Vec::<EpisodeResult>::new(), Vec::<Stored>::new());
     // The learner is None while an update runs; `known` is (updates, replay len, expert len, last metrics).
@@ -103,7 +102,7 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     let idle = Duration::from_secs_f64(args.idle_timeout_s.max(0.1));
     let publish_weights = async |learner: &Learner, st: &mut NodeState| -> anyhow::Result<()> {
         st.version += 1;
-        let data = learner.agent().actor_bytes(&scratch)?;
+        let data = learner.agent().actor_bytes()?;
         let model = cfg.agent.model.name().to_string();
         let w = PolicyWeights { header: wall_stamp(), version: st.version, updates: learner.updates(), model, format: "safetensors".into(), data };
         weights_pub.publish(w).await
@@ -256,7 +255,6 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     write_json(&dir.join("evals.json"), &st.evals).map_err(anyhow::Error::msg)?;
     // The curve is redrawn at every evaluation; draw it at the end too (a run may end before one).
     write_curve(&dir, &cfg, &st.evals)?;
-    let _ = std::fs::remove_file(&scratch);
     let c = &ingest.counts;
     info!("received {} transitions (stored {}, expert held {}, eval {})", c.transitions, c.stored, c.expert_held, c.eval);
     info!("expert transitions dropped (failed episodes) {}, malformed {}; replay {}", c.expert_dropped, c.bad, learner.replay().len());

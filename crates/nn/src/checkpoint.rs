@@ -75,9 +75,27 @@ pub fn save<M: Module>(module: &M, path: &Path) -> Result<(), CheckpointError> {
 
 /// Load parameters from `path` into `module`, after checking that every tensor name and shape
 /// matches (the first mismatch is reported).
-pub fn load<M: Module>(mut module: M, path: &Path) -> Result<M, CheckpointError> {
+pub fn load<M: Module>(module: M, path: &Path) -> Result<M, CheckpointError> {
+    load_checked(module, SafetensorsStore::from_file(path), path)
+}
+
+/// `module`'s parameters as safetensors bytes (what a weights message carries).
+pub fn to_bytes<M: Module>(module: &M) -> Result<Vec<u8>, CheckpointError> {
+    let label = Path::new("<memory>");
+    let store_err = |e: &dyn std::fmt::Display| CheckpointError::Store { path: label.into(), message: e.to_string() };
+    let mut store = SafetensorsStore::from_bytes(None);
+    module.save_into(&mut store).map_err(|e| store_err(&e))?;
+    store.get_bytes().map_err(|e| store_err(&e))
+}
+
+/// Load safetensors `bytes` into `module` with the checks of [`load`]; `label` names the source in
+/// errors (e.g. "PolicyWeights version 3").
+pub fn load_bytes<M: Module>(module: M, bytes: Vec<u8>, label: &str) -> Result<M, CheckpointError> {
+    load_checked(module, SafetensorsStore::from_bytes(Some(bytes)), Path::new(label))
+}
+
+fn load_checked<M: Module>(mut module: M, mut store: SafetensorsStore, path: &Path) -> Result<M, CheckpointError> {
     let store_err = |e: &dyn std::fmt::Display| CheckpointError::Store { path: path.into(), message: e.to_string() };
-    let mut store = SafetensorsStore::from_file(path);
     let in_file: Vec<(String, Vec<usize>)> = store
         .get_all_tensors()
         .map_err(|e| store_err(&e))?

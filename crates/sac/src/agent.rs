@@ -513,6 +513,20 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         Ok(())
     }
 
+    /// Replace the actor's weights with safetensors `bytes` (a `PolicyWeights` payload); `label`
+    /// names the source in errors.
+    pub fn load_actor_bytes(&mut self, bytes: Vec<u8>, label: &str) -> Result<(), AgentError> {
+        let actor = self.actor.clone();
+        self.actor = equiarm_nn::checkpoint::load_bytes(actor, bytes, label)?;
+        self.inference = None;
+        Ok(())
+    }
+
+    /// The actor's weights as safetensors bytes (what `PolicyWeights.data` carries).
+    pub fn actor_bytes(&self) -> Result<Vec<u8>, AgentError> {
+        Ok(equiarm_nn::checkpoint::to_bytes(&self.actor)?)
+    }
+
     /// Save the actor's weights alone.
     pub fn save_actor(&self, path: &Path) -> Result<(), AgentError> {
         Ok(equiarm_nn::checkpoint::save(&self.actor, path)?)
@@ -657,10 +671,14 @@ impl Agent {
         each!(self, a => a.load_actor(path))
     }
 
-    /// The actor's weights as safetensors bytes (what `PolicyWeights.data` carries).
-    pub fn actor_bytes(&self, scratch: &Path) -> Result<Vec<u8>, AgentError> {
-        self.save_actor(scratch)?;
-        std::fs::read(scratch).map_err(|e| AgentError::State { path: scratch.into(), message: e.to_string() })
+    /// See [`Sac::actor_bytes`].
+    pub fn actor_bytes(&self) -> Result<Vec<u8>, AgentError> {
+        each!(self, a => a.actor_bytes())
+    }
+
+    /// See [`Sac::load_actor_bytes`].
+    pub fn load_actor_bytes(&mut self, bytes: Vec<u8>, label: &str) -> Result<(), AgentError> {
+        each!(self, a => a.load_actor_bytes(bytes, label))
     }
 }
 

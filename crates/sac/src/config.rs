@@ -9,7 +9,7 @@
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::agent::{AgentConfig, ModelKind};
+use crate::agent::AgentConfig;
 use crate::replay::ReplayConfig;
 
 /// A configuration error, naming the field.
@@ -197,7 +197,6 @@ impl TrainConfig {
             return err("eval_episodes", "must be positive when eval_every > 0".into());
         }
         self.replay.validate().map_err(|e| ConfigError { field: "replay", message: e.to_string() })?;
-        let _ = ModelKind::Equi;
         Ok(())
     }
 

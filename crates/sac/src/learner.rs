@@ -9,7 +9,6 @@
 //! Limitations: frames must all have the configured `image_size`.
 
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -173,7 +172,7 @@ impl Learner {
         let size = self.cfg.image_size;
         let rows: Vec<&Stored> = slots
             .iter()
-            .map(|&i| self.replay.get(i).ok_or_else(|| LearnerError::Checkpoint { path: PathBuf::new(), message: format!("replay slot {i} is empty") }))
+            .map(|&i| self.replay.get(i).ok_or(crate::replay::ReplayError::SlotOutOfRange { slot: i, len: self.replay.len() }))
             .collect::<Result<_, _>>()?;
         let b = rows.len();
         let (k, m) = match self.cfg.augmentation {
@@ -335,6 +334,3 @@ fn first_difference(a: &serde_json::Value, b: &serde_json::Value, prefix: &str) 
         _ => prefix.to_string(),
     }
 }
-
-/// Shared frame handle.
-pub type FrameRef = Arc<Frame>;
