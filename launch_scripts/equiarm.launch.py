@@ -80,6 +80,8 @@ def commands(args):
     def pair(ns, env_seed, mode):
         name = ns.strip("/")
         sim = [exe, "sim", "--namespace", ns, "--task", task, "--seed", str(env_seed), "--resolution", str(frame)]
+        if ns == EVAL_NAMESPACE:
+            sim.append("--eval")  # its EpisodeResults are marked as evaluation episodes
         policy = [exe, "policy", "--namespace", ns, "--mode", mode, "--model", model, "--hidden", str(hidden),
                   "--image", image, "--seed", str(env_seed)]
         return [(f"sim_{name}", sim), (f"policy_{name}", policy)]

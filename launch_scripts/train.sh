@@ -80,7 +80,7 @@ for i in $(seq 0 $((num_envs - 1))); do
   start "sim$i" "$bin" sim --namespace "/env$i" --task "$task" --seed $((seed * 1000 + i)) --resolution "$image"
   start "policy$i" "$bin" policy --namespace "/env$i" --mode sample "${arch[@]}" --seed $((seed * 1000 + i)) --expert-episodes "$per_env" --max-lead 10
 done
-start sim_eval "$bin" sim --namespace /eval --task "$task" --seed $((seed * 1000 + 999)) --resolution "$image"
+start sim_eval "$bin" sim --namespace /eval --eval --task "$task" --seed $((seed * 1000 + 999)) --resolution "$image"
 # the eval pair may run about eval_episodes × 50 steps per eval_every updates
 eval_rate=$(( ($(cfg_get eval_episodes) * 50 + $(cfg_get eval_every) - 1) / ($(cfg_get eval_every) + 1) + 1 ))
 start policy_eval "$bin" policy --namespace /eval --mode greedy "${arch[@]}" --seed $((seed * 1000 + 999)) --max-lead 50 --steps-per-update "$eval_rate"

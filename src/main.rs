@@ -59,9 +59,12 @@ struct RecordArgs {
     output: std::path::PathBuf,
     /// Topics to record, as TOPIC:TYPE (e.g. /env0/observation:equiarm_msgs/msg/Observation).
     topics: Vec<String>,
-    /// Also record every topic of a known type that appears on the graph (checked every second).
+    /// Also record every topic of a known type that appears on the graph.
     #[arg(short, long)]
     all: bool,
+    /// With --all: how often to look for new topics, in ms (as rosbag2's --polling-interval).
+    #[arg(long, default_value_t = 100)]
+    polling_interval_ms: u64,
     /// Chunk compression.
     #[arg(long, value_enum, default_value = "zstd")]
     compression: CompressionArg,
@@ -302,6 +305,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 output: a.output,
                 topics,
                 all: a.all,
+                polling_interval: std::time::Duration::from_millis(a.polling_interval_ms.max(1)),
                 writer,
                 status_every: (!a.quiet).then(|| std::time::Duration::from_secs(1)),
                 duration: a.duration_s.map(std::time::Duration::from_secs_f64),

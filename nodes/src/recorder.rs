@@ -6,7 +6,7 @@
 //!
 //! ## Limitations
 //! Only the types equiarm knows (`equiarm msg list`) can be recorded: ros2-client offers no
-//! raw-bytes subscription. With `--all`, topics are found by discovery every second.
+//! raw-bytes subscription. With `--all`, topics are found by discovery (polled every 100 ms by default).
 
 use std::collections::HashSet;
 use std::io::Write as _;
@@ -31,6 +31,9 @@ pub struct RecordConfig {
     pub topics: Vec<(String, String)>,
     /// Also record every discovered topic of a known type.
     pub all: bool,
+    /// How often `all` looks for new topics (rosbag2's `--polling-interval`, default 100 ms). A
+    /// topic's messages published before its subscription matches are not recorded.
+    pub polling_interval: Duration,
     /// Bag writing options.
     pub writer: WriterOptions,
     /// Print the status line every this often (None: never).
@@ -155,7 +158,7 @@ pub async fn run(opts: &RosOptions, cfg: RecordConfig) -> anyhow::Result<equiarm
                 if cfg.duration.is_some_and(|d| start.elapsed() >= d) {
                     break;
                 }
-                if cfg.all && last_discovery.elapsed() >= Duration::from_secs(1) {
+                if cfg.all && last_discovery.elapsed() >= cfg.polling_interval {
                     last_discovery = Instant::now();
                     for t in node.discovered_topics() {
                         if let Some((name, type_name)) = ros_topic(&t.name, &t.type_name)

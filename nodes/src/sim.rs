@@ -19,7 +19,8 @@
 //! step, `dt * substeps`) per observation made, from 0; wall time is never read.
 //!
 //! ## Limitations
-//! One env per process (run N processes in `/env0 … /envN-1` for N envs). Episodes are not `eval`.
+//! One env per process (run N processes in `/env0 … /envN-1` for N envs). Episodes are `eval` only
+//! with `--eval`.
 
 use std::time::Duration;
 
@@ -78,6 +79,10 @@ pub struct SimArgs {
     /// Re-publish the current Observation when no command for it came within this time.
     #[arg(long, default_value_t = 1000)]
     pub timeout_ms: u64,
+    /// An evaluation env: its EpisodeResults have `eval` set (the trainer and `bag eval` count them
+    /// as evaluation episodes, never as training data).
+    #[arg(long)]
+    pub eval: bool,
 }
 
 /// The EnvConfig the arguments describe: the config file (or defaults), then the flags.
@@ -267,7 +272,7 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
                     ret,
                     discounted_return: disc,
                     expert: all_expert,
-                    eval: false,
+                    eval: args.eval,
                 };
                 info!("{}: episode {episode} (seed {seed}) ended after {steps} steps, success {}", node.name(), r.info.success);
                 episode_pub.publish(result).await?;
