@@ -17,4 +17,5 @@ pub mod policy;
 pub mod gate;
 pub mod policy_cli;
 pub mod trainer;
+pub mod lockstep;
 pub mod ingest;
