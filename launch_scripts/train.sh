@@ -21,6 +21,10 @@
 #   --run-dir DIR       where everything goes (default runs/<task>-<date>)
 #   --total-updates U   override the config's number of updates
 #   --no-record         do not record a bag
+#   --deterministic     lock-step rounds: the trainer and the training policies get --deterministic
+#                       (no --max-lead); with one seed two runs record the same /transitions of the
+#                       training envs and end with the same weights. The eval pair is not lock-stepped:
+#                       it evaluates whatever weights are current, so evaluations may differ.
 #   -- ARGS...          passed on to `equiarm train`
 # Environment: ROS_DOMAIN_ID (default 0), ROS_LOCALHOST_ONLY (default 1: loopback only),
 # EQUIARM_BIN (use this binary instead of building), CARGO_TARGET_DIR.
@@ -29,7 +33,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-task=block_pulling preset=reduced config="" num_envs=5 seed=0 run_dir="" total_updates="" record=1
+task=block_pulling preset=reduced config="" num_envs=5 seed=0 run_dir="" total_updates="" record=1 det=0
 extra=()
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -41,8 +45,9 @@ while [ $# -gt 0 ]; do
     --run-dir) run_dir=$2; shift 2 ;;
     --total-updates) total_updates=$2; shift 2 ;;
     --no-record) record=0; shift ;;
+    --deterministic) det=1; shift ;;
     --) shift; extra=("$@"); break ;;
-    -h|--help) sed -n '2,30p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,32p' "$0"; exit 0 ;;
     *) echo "train.sh: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -67,6 +72,9 @@ demos=$(cfg_get demo_episodes)
 # demo episodes are spread over the envs (at least one each); unsuccessful ones are dropped
 per_env=$(( (demos + num_envs - 1) / num_envs ))
 arch=(--model "$model" --hidden "$hidden" --image "$image:$input")
+# training policies: flow control on the trainer's update count, or the lock-step on weights versions
+pace=(--max-lead 10) trainer_mode=()
+[ $det = 1 ] && pace=(--deterministic) trainer_mode=(--deterministic)
 
 start() { eqa_start "$1" "$run_dir/logs/$1.log" "${@:2}"; }
 echo "== run directory $run_dir (ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in $run_dir/logs)"
@@ -78,7 +86,7 @@ else
 fi
 for i in $(seq 0 $((num_envs - 1))); do
   start "sim$i" "$bin" sim --namespace "/env$i" --task "$task" --seed $((seed * 1000 + i)) --resolution "$image"
-  start "policy$i" "$bin" policy --namespace "/env$i" --mode sample "${arch[@]}" --seed $((seed * 1000 + i)) --expert-episodes "$per_env" --max-lead 10
+  start "policy$i" "$bin" policy --namespace "/env$i" --mode sample "${arch[@]}" --seed $((seed * 1000 + i)) --expert-episodes "$per_env" "${pace[@]}"
 done
 start sim_eval "$bin" sim --namespace /eval --eval --task "$task" --seed $((seed * 1000 + 999)) --resolution "$image"
 # the eval pair may run about eval_episodes × 50 steps per eval_every updates
@@ -87,7 +95,7 @@ start policy_eval "$bin" policy --namespace /eval --mode greedy "${arch[@]}" --s
 
 # The trainer runs in the foreground (its progress line on this terminal).
 set +e
-"$bin" train --config "$run_dir/config.json" --run-dir "$run_dir" --eval-namespace /eval "${extra[@]}" 2> >(tee "$run_dir/logs/trainer.log" >&2)
+"$bin" train --config "$run_dir/config.json" --run-dir "$run_dir" --eval-namespace /eval "${trainer_mode[@]}" "${extra[@]}" 2> >(tee "$run_dir/logs/trainer.log" >&2)
 status=$?
 set -e
 echo "== training finished (exit $status); stopping the suite"

@@ -46,7 +46,7 @@ enum Command {
     /// GripperCommand on `gripper_cmd` naming its seq: the actor's sampled or greedy action, the
     /// expert's, or a random one. In sample/greedy mode it takes new actor weights from
     /// /policy/weights (transient-local) and logs `weights version N (updates U)` on each switch.
-    Policy(equiarm_nodes::policy::PolicyArgs),
+    Policy(equiarm_nodes::policy_cli::PolicyArgs),
     /// Networks: diagnostics of saved (or freshly initialised) equivariant networks.
     #[command(subcommand)]
     Nn(NnCommand),

@@ -14,5 +14,8 @@ pub mod sim;
 pub mod policy_eval;
 pub mod train_cli;
 pub mod policy;
+pub mod gate;
+pub mod policy_cli;
 pub mod trainer;
+pub mod lockstep;
 pub mod ingest;

@@ -6,22 +6,26 @@
 //! Modes: `sample` (tanh(mean + std·ε), exploration), `greedy` (tanh(mean), evaluation), `expert`
 //! (sends back the Observation's `expert_action`, source EXPERT), `random` (uniform in [-1, 1]^5 from
 //! the seeded RNG, source RANDOM). A re-published Observation (same seq) gets the identical command.
+//! When to answer (at once, `--max-lead` flow control, `--deterministic` lock-step) is [`crate::gate`]'s.
+//! The sampling noise comes from the actor's RNG seeded with `--seed` (5 normals per sampled action),
+//! so the same observations answered in the same order give the same actions.
 //!
 //! ## Limitations
 //! One env per node. Acting is on the runtime thread (batch 1), so a slow actor delays weights too.
 
 use std::collections::{HashSet, VecDeque};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{Context as _, bail};
+use anyhow::Context as _;
 use equiarm_msgs::msg::{GripperCommand, Observation, PolicyWeights, TrainerStatus};
 use equiarm_sac::agent::{ActMode, Agent, AgentConfig, ModelKind};
-use equiarm_sac::config::TrainConfig;
 use equiarm_sac::frame::Frame;
 use equiarm_sim::{Action, rng::Rng};
 use log::{info, warn};
 
+use crate::gate::{Gate, Progress};
+use crate::policy_cli::{PolicyArgs, architecture};
 use crate::ros::{Publisher, RosNode, RosOptions, Subscriber, qos, shutdown_signal};
 
 /// How the node acts.
@@ -35,79 +39,6 @@ pub enum PolicyMode {
     Expert,
     /// Uniform random actions.
     Random,
-}
-
-/// Options of `equiarm policy`.
-#[derive(Clone, Debug, clap::Args)]
-pub struct PolicyArgs {
-    /// Namespace of the node and its relative topics (the env's namespace).
-    #[arg(long, default_value = "/env0")]
-    pub namespace: String,
-    /// How to act.
-    #[arg(long, value_enum, default_value = "sample")]
-    pub mode: PolicyMode,
-    /// Initial actor: an actor .safetensors file, a checkpoint directory, or a run directory (its
-    /// latest checkpoint). Directories give the architecture from their manifest.
-    #[arg(long)]
-    pub checkpoint: Option<PathBuf>,
-    /// Network family when there is no manifest: equi, cnn or sen (default: the reduced preset's).
-    #[arg(long)]
-    pub model: Option<String>,
-    /// Hidden size when there is no manifest (default: the reduced preset's).
-    #[arg(long)]
-    pub hidden: Option<usize>,
-    /// Frame and network input size as FRAME:INPUT when there is no manifest (default: reduced preset).
-    #[arg(long)]
-    pub image: Option<String>,
-    /// Seed of the initial weights, the sampling noise and the random mode.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Topic of the trainer's weights.
-    #[arg(long, default_value = "/policy/weights")]
-    pub weights_topic: String,
-    /// Answer the first K episodes of the env with the expert's action (source EXPERT): the
-    /// demonstrations of PAPER_SPEC §2 (the trainer keeps only the successful ones).
-    #[arg(long, default_value_t = 0)]
-    pub expert_episodes: u32,
-    /// Flow control for the paper's update-to-data ratio: once the trainer has started updating,
-    /// act at most this many policy steps ahead of its update count (from /trainer/status);
-    /// 0 = no limit. With N envs and one update per N transitions, each env then makes about one
-    /// step per update, as in the paper's synchronous loop.
-    #[arg(long, default_value_t = 0)]
-    pub max_lead: u64,
-    /// With --max-lead: policy steps allowed per trainer update (1 for training envs; an eval env
-    /// needs about eval_episodes × episode length / eval_every).
-    #[arg(long, default_value_t = 1)]
-    pub steps_per_update: u64,
-    /// No latency lines.
-    #[arg(long, short)]
-    pub quiet: bool,
-}
-
-/// The actor's architecture and initial weights the options describe: (agent config, frame size,
-/// actor file). A directory's manifest wins over the flags.
-pub fn architecture(args: &PolicyArgs) -> anyhow::Result<(AgentConfig, usize, Option<PathBuf>)> {
-    if let Some(path) = args.checkpoint.as_ref().filter(|p| p.is_dir()) {
-        let dir = equiarm_sac::train::find_checkpoint(path)?;
-        let m = equiarm_sac::learner::read_manifest(&dir)?;
-        return Ok((m.config.agent.clone(), m.config.image_size, Some(dir.join("actor.safetensors"))));
-    }
-    let reduced = TrainConfig::reduced("block_pulling");
-    let mut agent = reduced.agent.clone();
-    let mut frame = reduced.image_size;
-    if let Some(m) = &args.model {
-        agent.model = ModelKind::parse(m).with_context(|| format!("unknown --model `{m}`: use equi, cnn or sen"))?;
-    }
-    agent.hidden = args.hidden.unwrap_or(agent.hidden);
-    if let Some(img) = &args.image {
-        let (f, i) = img.split_once(':').with_context(|| format!("--image `{img}`: expected FRAME:INPUT, e.g. 76:64"))?;
-        frame = f.parse().with_context(|| format!("--image `{img}`: frame size"))?;
-        agent.input_size = i.parse().with_context(|| format!("--image `{img}`: input size"))?;
-    }
-    if agent.input_size > frame {
-        bail!("--image: the network input {} is larger than the frame {frame}", agent.input_size);
-    }
-    Ok((agent, frame, args.checkpoint.clone()))
 }
 
 /// The frame of an Observation (rgb8 colour, 32FC1 depth, holding); the error says what is wrong.
@@ -145,6 +76,7 @@ pub struct Policy {
     actions: u64,
     expert_episodes: u32,
     policy_steps: u64,
+    answered: u64,
 }
 
 impl Policy {
@@ -161,7 +93,7 @@ impl Policy {
             }
             _ => None,
         };
-        Ok(Policy { mode, agent, frame_size, rng: Rng::new(seed), last: None, version: 0, latencies: VecDeque::new(), actions: 0, expert_episodes: 0, policy_steps: 0 })
+        Ok(Policy { mode, agent, frame_size, rng: Rng::new(seed), last: None, version: 0, latencies: VecDeque::new(), actions: 0, expert_episodes: 0, policy_steps: 0, answered: 0 })
     }
 
     /// Answer episodes `0..k` of the env with the expert.
@@ -170,16 +102,11 @@ impl Policy {
         self
     }
 
-    /// Whether `obs` would be answered by the learned or random policy (not by the expert, and
-    /// not a re-published seq), i.e. whether answering it counts against the flow-control lead.
-    pub fn is_policy_step(&self, obs: &Observation) -> bool {
+    /// Where the node stands if it answered `obs` now (what [`crate::gate::Gate`] decides on).
+    pub fn progress(&self, obs: &Observation) -> Progress {
         let repeat = self.last.as_ref().is_some_and(|(seq, _)| *seq == obs.seq);
-        !repeat && self.mode != PolicyMode::Expert && obs.episode >= self.expert_episodes
-    }
-
-    /// Policy (non-expert) steps answered so far.
-    pub fn policy_steps(&self) -> u64 {
-        self.policy_steps
+        let policy_step = !repeat && self.mode != PolicyMode::Expert && obs.episode >= self.expert_episodes;
+        Progress { repeat, policy_step, policy_steps: self.policy_steps, answered: self.answered, version: self.version }
     }
 
     /// Whether this mode takes weights from the trainer.
@@ -229,6 +156,7 @@ impl Policy {
 
     fn remember(&mut self, cmd: GripperCommand) -> GripperCommand {
         self.last = Some((cmd.obs_seq, cmd.clone()));
+        self.answered += 1;
         cmd
     }
 
@@ -277,60 +205,51 @@ impl Policy {
 pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
     let (agent, frame, actor) = architecture(args)?;
     let mut policy = Policy::new(args.mode, agent.clone(), frame, actor.as_deref(), args.seed)?.with_expert_episodes(args.expert_episodes);
+    let mut gate = Gate::new(args.max_lead, args.steps_per_update, args.deterministic, policy.learns())?;
     let mut node = RosNode::new(&args.namespace, "policy", opts)?;
     let obs_sub = node.subscription::<Observation>("observation", qos::command())?;
     let cmd_pub = node.publisher::<GripperCommand>("gripper_cmd", qos::command())?;
     let weights_sub = policy.learns().then(|| node.subscription::<PolicyWeights>(&args.weights_topic, qos::latched())).transpose()?;
-    let status_sub = (args.max_lead > 0).then(|| node.subscription::<TrainerStatus>("/trainer/status", qos::stream(10))).transpose()?;
-    // Flow control: an Observation held back until the trainer has caught up.
-    let (mut trainer_updates, mut held): (Option<u64>, Option<Observation>) = (None, None);
-    let lead = (args.max_lead > 0).then_some((args.max_lead, args.steps_per_update));
+    let status_sub = gate.needs_status().then(|| node.subscription::<TrainerStatus>("/trainer/status", qos::stream(10))).transpose()?;
     let arch = if policy.learns() { format!(", {} hidden {} input {}", agent.model.name(), agent.hidden, agent.input_size) } else { String::new() };
-    info!("{}: mode {:?}{arch}", node.name(), args.mode);
+    info!("{}: mode {:?}{arch}, gate {:?}", node.name(), args.mode, gate.rule());
     let (mut sent, mut bad, mut refused) = (0u64, 0u64, HashSet::new());
     let signal = shutdown_signal();
     tokio::pin!(signal);
     loop {
-        tokio::select! {
+        let ready = tokio::select! {
             s = &mut signal => { info!("{}: {} received, shutting down", node.name(), s?); break; }
             r = recv_some(status_sub.as_ref()) => {
-                trainer_updates = Some(r?.0.updates);
-                if let Some(obs) = held.take() {
-                    held = answer(&mut policy, obs, trainer_updates, lead, &cmd_pub, &mut sent, &mut bad).await;
-                }
+                gate.on_status(r?.0.updates);
+                gate.release(&policy)
             }
-            r = obs_sub.recv() => {
-                let (obs, _) = r?;
-                held = answer(&mut policy, obs, trainer_updates, lead, &cmd_pub, &mut sent, &mut bad).await;
-                if let Some((median, p95)) = policy.latency_report().filter(|_| !args.quiet) {
-                    info!("actor latency (batch 1, last 100): median {median:.2} ms, p95 {p95:.2} ms");
-                }
-            }
+            r = obs_sub.recv() => gate.offer(r?.0, &policy),
             r = recv_some(weights_sub.as_ref()) => {
                 let (w, _) = r?;
                 match policy.on_weights(&w) {
-                    WeightsOutcome::Loaded => info!("weights version {} (updates {})", w.version, w.updates),
-                    WeightsOutcome::Stale => {}
+                    // In lock-step a new version comes every round: log the first and every 100th.
+                    WeightsOutcome::Loaded if !args.deterministic || w.version % 100 == 1 => info!("weights version {} (updates {})", w.version, w.updates),
+                    WeightsOutcome::Loaded | WeightsOutcome::Stale => {}
                     WeightsOutcome::Refused(why) => if refused.insert(why.clone()) { warn!("refusing weights version {}: {why}", w.version) },
                     WeightsOutcome::Failed(why) => warn!("weights version {} did not load, keeping version {}: {why}", w.version, policy.version()),
                 }
+                gate.release(&policy)
+            }
+        };
+        if let Some(obs) = ready {
+            answer(&mut policy, obs, &cmd_pub, &mut sent, &mut bad).await;
+            if let Some((median, p95)) = policy.latency_report().filter(|_| !args.quiet) {
+                info!("actor latency (batch 1, last 100): median {median:.2} ms, p95 {p95:.2} ms");
             }
         }
     }
-    info!("{}: sent {sent} commands, skipped {bad} observations, weights version {}", node.name(), policy.version());
+    let held = if gate.holds() { " (one observation held back)" } else { "" };
+    info!("{}: sent {sent} commands, skipped {bad} observations, weights version {}{held}", node.name(), policy.version());
     Ok(sent)
 }
 
-/// Answer `obs` unless flow control holds it back (then it is returned, to be answered when the
-/// trainer's update count has caught up; a re-publication by the sim replaces it). The limit applies
-/// once a TrainerStatus has been seen: `steps ≤ steps_per_update × updates + max_lead`.
-async fn answer(policy: &mut Policy, obs: Observation, trainer_updates: Option<u64>, lead: Option<(u64, u64)>, cmd_pub: &Publisher<GripperCommand>, sent: &mut u64, bad: &mut u64) -> Option<Observation> {
-    if let (Some(u), Some((max_lead, per))) = (trainer_updates, lead)
-        && policy.is_policy_step(&obs)
-        && policy.policy_steps() >= per * u + max_lead
-    {
-        return Some(obs);
-    }
+/// Answers `obs` and publishes the command; a bad Observation is counted and logged (rate-limited).
+async fn answer(policy: &mut Policy, obs: Observation, cmd_pub: &Publisher<GripperCommand>, sent: &mut u64, bad: &mut u64) {
     match policy.answer(&obs) {
         Ok(cmd) => match cmd_pub.publish(cmd).await {
             Ok(()) => *sent += 1,
@@ -343,7 +262,6 @@ async fn answer(policy: &mut Policy, obs: Observation, trainer_updates: Option<u
             }
         }
     }
-    None
 }
 
 async fn recv_some<M: equiarm_msgs::RosMessage>(sub: Option<&Subscriber<M>>) -> anyhow::Result<(M, ros2_client::MessageInfo)> {

@@ -300,6 +300,12 @@ impl<M: RosMessage> Subscriber<M> {
         &self.topic
     }
 
+    /// Publishers matched so far, as this node has discovered them (the remote side may not have
+    /// matched this subscription yet).
+    pub fn publisher_count(&self, node: &RosNode) -> usize {
+        self.inner.get_publisher_count(&node.node)
+    }
+
     /// Payloads dropped on this topic so far.
     pub fn bad_input_count(&self) -> u64 {
         self.log.counts().get(&self.topic).copied().unwrap_or(0)

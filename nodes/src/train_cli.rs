@@ -89,6 +89,12 @@ pub struct TrainArgs {
     /// Over DDS: exit when no transition arrived for this many seconds after the first one.
     #[arg(long, default_value_t = 60.0)]
     pub idle_timeout_s: f64,
+    /// Over DDS: lock-step rounds (the policies need --deterministic too). Round r is every training
+    /// env's r-th transition, processed in env-name order, then one update (once the replay is ready)
+    /// and the next weights version; --weights-every is ignored. With one seed, two runs make the
+    /// same transitions and the same weights. Not with --resume.
+    #[arg(long)]
+    pub deterministic: bool,
 }
 
 impl TrainArgs {
@@ -137,6 +143,9 @@ impl TrainArgs {
 
 /// Run the in-process loop; Ctrl-C / SIGTERM stop it after the current step with a checkpoint.
 pub fn run_in_process(args: &TrainArgs, cfg: TrainConfig) -> anyhow::Result<RunSummary> {
+    if args.deterministic {
+        bail!("--deterministic is for the trainer node over DDS; the in-process loop (--in-process) is deterministic already");
+    }
     let stop = stop_flag();
     let resume = match &args.resume {
         Some(p) => Some(equiarm_sac::train::find_checkpoint(p)?),

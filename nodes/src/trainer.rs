@@ -11,10 +11,21 @@
 //!   `--weights-every` updates.
 //! - Stops at `total_updates`, on SIGINT/SIGTERM, or after `--idle-timeout-s` without transitions:
 //!   it first takes what is still in flight (up to 2 s), then writes a checkpoint.
+//! - `--deterministic` (lock-step, with policies run with `--deterministic`): the training envs'
+//!   messages are taken in rounds ([`crate::lockstep`]): round r is every env's r-th transition, in
+//!   env-name order, each followed by its episode's result when it ends one. After each round: its
+//!   rows into the replay, one update once the replay is ready, then the next weights version
+//!   (version r + 2; the policies answer their r-th observation with version r + 1). No weights go
+//!   out after the round that reaches `total_updates`, so the envs stop there and two runs with one
+//!   seed record the same transitions and end with the same weights. The first weights wait until
+//!   `num_envs` sims are seen on `/transitions` and `/episodes`. The eval pair is not part of the
+//!   rounds: it acts on whatever weights are current, so evaluations are not reproducible.
 //!
 //! ## Limitations
 //! EpisodeResults count as evaluation when `eval` is set or their env is the eval env (the sim node
-//! does not set `eval`). Resume restores the learner, metrics and weights version, not held demos.
+//! does not set `eval`). Resume restores the learner, metrics and weights version, not held demos;
+//! `--deterministic` refuses `--resume`. In lock-step a lost transition or an env that stops stalls
+//! the rounds (logged with what the round waits for) until the idle timeout.
 
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
@@ -36,7 +47,8 @@ use serde::{Deserialize, Serialize};
 use tokio::task::JoinHandle;
 
 use crate::ingest::Ingest;
-use crate::ros::{RosNode, RosOptions, qos};
+use crate::lockstep::{Item, Lockstep};
+use crate::ros::{RosNode, RosOptions, Subscriber, qos};
 use crate::train_cli::{TrainArgs, stop_flag};
 
 /// Saved beside each checkpoint (`trainer.json`).
@@ -65,8 +77,58 @@ async fn finished(task: &mut Option<Update>) -> anyhow::Result<(Learner, Result<
     }
 }
 
+fn start_update(home: &mut Option<Learner>) -> Option<Update> {
+    let mut l = home.take()?;
+    Some(tokio::task::spawn_blocking(move || {
+        let m = l.update();
+        (l, m)
+    }))
+}
+
+/// Hands `t` to the ingest (its rows into `queue`); a refused transition is logged once per reason.
+fn ingest_transition(ingest: &mut Ingest, t: &Transition, queue: &mut Vec<Stored>, bad_logged: &mut HashSet<String>) {
+    match ingest.transition(t) {
+        Ok(rows) => queue.extend(rows),
+        Err(e) if bad_logged.insert(e.clone()) => warn!("skipping a transition of '{}' (seq {}): {e}", t.obs.env, t.obs.seq),
+        Err(_) => {}
+    }
+}
+
+/// Hands a training env's result to the ingest (released demos into `queue`) and logs its metrics.
+fn ingest_episode(ingest: &mut Ingest, r: &EpisodeResult, queue: &mut Vec<Stored>, metrics: &mut MetricsWriter, step: u64, wall_s: f64) -> anyhow::Result<()> {
+    queue.extend(ingest.episode(r));
+    let named = [("charts/episodic_return", r.ret as f64), ("charts/discounted_return", r.discounted_return as f64), ("charts/episodic_length", r.steps as f64), ("charts/success", r.success as u8 as f64)];
+    metrics.log(step, wall_s, &named)?;
+    Ok(())
+}
+
+/// Lock-step: a transition a sim sends before it has matched this trainer's reader is lost and
+/// stalls every round, so the first weights (which start the envs) wait until `/transitions` and
+/// `/episodes` have at least `n` writers each and their counts held still for a second (at most 60 s).
+async fn wait_for_sims(node: &RosNode, tr: &Subscriber<Transition>, ep: &Subscriber<EpisodeResult>, n: usize, stop: &std::sync::atomic::AtomicBool) {
+    let (t0, mut last, mut since) = (Instant::now(), (0, 0), Instant::now());
+    loop {
+        let now = (tr.publisher_count(node), ep.publisher_count(node));
+        if now != last {
+            (last, since) = (now, Instant::now());
+        }
+        if now.0 >= n && now.1 >= n && since.elapsed() >= Duration::from_secs(1) {
+            info!("{}: {} writers on /transitions, {} on /episodes; starting the rounds", node.name(), now.0, now.1);
+            return;
+        }
+        if stop.load(Ordering::Relaxed) || t0.elapsed() > Duration::from_secs(60) {
+            warn!("{}: {} writers on /transitions and {} on /episodes after {:.0} s (num_envs {n}); starting anyway", node.name(), now.0, now.1, t0.elapsed().as_secs_f64());
+            return;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
 /// Runs the trainer node until `total_updates`, a signal or the idle timeout.
 pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyhow::Result<RunSummary> {
+    if args.deterministic && args.resume.is_some() {
+        anyhow::bail!("--deterministic does not resume (--resume): the policies count rounds from the first weights version of a fresh run");
+    }
     let started = Instant::now();
     let dir = args.run_dir.clone();
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -90,6 +152,10 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     let weights_pub = node.publisher::<PolicyWeights>("/policy/weights", qos::latched())?;
     let status_pub = node.publisher::<TrainerStatus>("/trainer/status", qos::stream(10))?;
     let mut ingest = Ingest::new(&cfg, &args.eval_namespace);
+    // Lock-step: the rounds, when the last one was handed on, the round a stall was logged for,
+    // messages refused.
+    let mut lockstep = args.deterministic.then(|| Lockstep::new(cfg.num_envs));
+    let (mut last_round, mut stall_logged, mut refused) = (Instant::now(), None::<u64>, 0u64);
     let (mut owed, mut since, mut pending_eval, mut queue) = (0u64, 0usize, Vec::<EpisodeResult>::new(), Vec::<Stored>::new());
     // The learner is None while an update runs; `known` is (updates, replay len, expert len, last metrics).
     let mut known = (learner.updates(), learner.replay().len(), learner.replay().expert_len(), Metrics::default());
@@ -107,8 +173,12 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
         let w = PolicyWeights { header: wall_stamp(), version: st.version, updates: learner.updates(), model, format: "safetensors".into(), data };
         weights_pub.publish(w).await
     };
+    if lockstep.is_some() {
+        wait_for_sims(&node, &tr_sub, &ep_sub, cfg.num_envs, &stop).await;
+    }
     publish_weights(home.as_ref().expect("home"), &mut st).await?;
-    info!("{}: waiting for transitions ({} envs, eval env '{}')", node.name(), cfg.num_envs, args.eval_namespace);
+    let mode = if lockstep.is_some() { ", deterministic lock-step" } else { "" };
+    info!("{}: waiting for transitions ({} envs, eval env '{}'{mode})", node.name(), cfg.num_envs, args.eval_namespace);
     // Stop reason and the end of the final drain (what is in flight when stopping is still taken).
     let mut stopping: Option<(&str, Instant)> = None;
     loop {
@@ -123,6 +193,8 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
             stopping = why.map(|w| (w, Instant::now() + Duration::from_secs(2)));
         }
         let ready = known.1 + queue.len() >= cfg.training_starts.max(1);
+        let round_ready = lockstep.as_ref().is_some_and(Lockstep::ready);
+        let work = home.is_some() && stopping.is_none() && ((owed > 0 && ready) || round_ready);
         let mut got = Vec::new();
         while let Some((t, _)) = tr_sub.recv_timeout(Duration::ZERO).await? {
             got.push(Ok(t));
@@ -138,7 +210,7 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
                 Some((t, _)) if stopping.is_some_and(|s| Instant::now() < s.1) => got.push(Ok(t)),
                 _ => break,
             }
-        } else if got.is_empty() && !(owed > 0 && ready && home.is_some() && stopping.is_none()) {
+        } else if got.is_empty() && !work {
             tokio::select! {
                 r = tr_sub.recv() => got.push(Ok(r?.0)),
                 r = ep_sub.recv() => got.push(Err(r?.0)),
@@ -148,13 +220,19 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
         }
         for m in got {
             match m {
+                // Lock-step: the training envs' messages wait for their round.
+                Ok(t) if lockstep.is_some() && !ingest.is_eval(&t.obs.env) => {
+                    last_tr = Some(Instant::now());
+                    if let Err(e) = lockstep.as_mut().expect("checked").transition(t) {
+                        refused += 1;
+                        if refused.is_power_of_two() {
+                            warn!("{e} ({refused} refused so far)");
+                        }
+                    }
+                }
                 Ok(t) => {
                     last_tr = Some(Instant::now());
-                    match ingest.transition(&t) {
-                        Ok(rows) => queue.extend(rows),
-                        Err(e) if bad_logged.insert(e.clone()) => warn!("skipping a transition of '{}' (seq {}): {e}", t.obs.env, t.obs.seq),
-                        Err(_) => {}
-                    }
+                    ingest_transition(&mut ingest, &t, &mut queue, &mut bad_logged);
                     if !ingest.is_eval(&t.obs.env) {
                         st.global_step += 1;
                         since += 1;
@@ -181,11 +259,17 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
                         write_curve(&dir, &cfg, &st.evals)?;
                     }
                 }
-                Err(r) => {
-                    queue.extend(ingest.episode(&r));
-                    let named = [("charts/episodic_return", r.ret as f64), ("charts/discounted_return", r.discounted_return as f64), ("charts/episodic_length", r.steps as f64), ("charts/success", r.success as u8 as f64)];
-                    metrics.log(st.global_step, wall(&started), &named)?;
-                }
+                Err(r) => match lockstep.as_mut() {
+                    Some(ls) => {
+                        if let Err(e) = ls.episode(r) {
+                            refused += 1;
+                            if refused.is_power_of_two() {
+                                warn!("{e} ({refused} refused so far)");
+                            }
+                        }
+                    }
+                    None => ingest_episode(&mut ingest, &r, &mut queue, &mut metrics, st.global_step, wall(&started))?,
+                },
             }
         }
         if let Some((learner, m)) = done {
@@ -194,14 +278,20 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
             if u % 10 == 0 || u == 1 {
                 metrics.log(st.global_step, wall(&started), &m.named())?;
             }
-            if u == 1 || (args.weights_every > 0 && u.is_multiple_of(args.weights_every)) {
+            // Lock-step: the round's weights, except after the last update (the envs stop there).
+            let due = match lockstep {
+                Some(_) => u < cfg.total_updates,
+                None => u == 1 || (args.weights_every > 0 && u.is_multiple_of(args.weights_every)),
+            };
+            if due {
                 publish_weights(&learner, &mut st).await?;
             }
             if cfg.checkpoint_every > 0 && u.is_multiple_of(cfg.checkpoint_every) {
                 last_ck = Some(checkpoint(&learner, &st, &dir)?);
             }
             if let Some(p) = progress.as_mut() {
-                p.update(u, &[("alpha", format!("{:.3}", m.alpha)), ("transitions", ingest.counts.transitions.to_string()), ("owed", owed.to_string())]);
+                let (name, n) = lockstep.as_ref().map_or(("owed", owed), |l| ("rounds", l.rounds()));
+                p.update(u, &[("alpha", format!("{:.3}", m.alpha)), ("transitions", ingest.counts.transitions.to_string()), (name, n.to_string())]);
             }
             known.3 = m;
             home = Some(learner);
@@ -210,15 +300,47 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
             for row in queue.drain(..) {
                 learner.push(row)?;
             }
-            known = (learner.updates(), learner.replay().len(), learner.replay().expert_len(), known.3);
-            if stopping.is_none() && owed > 0 && learner.ready() && learner.updates() < cfg.total_updates {
-                owed -= 1;
-                let mut l = home.take().expect("home");
-                task = Some(tokio::task::spawn_blocking(move || {
-                    let m = l.update();
-                    (l, m)
-                }));
+            let mut update = false;
+            // Lock-step: one complete round at a time, in order; then its update or its weights.
+            if let Some(ls) = lockstep.as_mut()
+                && stopping.is_none()
+                && let Some(items) = ls.next_round()
+            {
+                for item in items {
+                    match item {
+                        Item::Transition(t) => {
+                            ingest_transition(&mut ingest, &t, &mut queue, &mut bad_logged);
+                            st.global_step += 1;
+                        }
+                        Item::Episode(r) => ingest_episode(&mut ingest, &r, &mut queue, &mut metrics, st.global_step, wall(&started))?,
+                    }
+                }
+                for row in queue.drain(..) {
+                    learner.push(row)?;
+                }
+                last_round = Instant::now();
+                update = learner.ready() && learner.updates() < cfg.total_updates;
+                if !update {
+                    publish_weights(learner, &mut st).await?;
+                }
             }
+            known = (learner.updates(), learner.replay().len(), learner.replay().expert_len(), known.3);
+            if lockstep.is_none() && stopping.is_none() && owed > 0 && learner.ready() && learner.updates() < cfg.total_updates {
+                owed -= 1;
+                update = true;
+            }
+            if update {
+                task = start_update(&mut home);
+            }
+        }
+        if let Some(ls) = &lockstep
+            && home.is_some()
+            && stopping.is_none()
+            && last_round.elapsed() >= Duration::from_secs(10)
+            && stall_logged != Some(ls.rounds())
+        {
+            stall_logged = Some(ls.rounds());
+            warn!("deterministic: round {} has waited {:.0} s for {}", ls.rounds(), last_round.elapsed().as_secs_f64(), ls.waiting_for().join(", "));
         }
         if last_status.elapsed() >= Duration::from_secs(1) {
             let dt = last_status.elapsed().as_secs_f32();
@@ -255,6 +377,10 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     write_json(&dir.join("evals.json"), &st.evals).map_err(anyhow::Error::msg)?;
     // The curve is redrawn at every evaluation; draw it at the end too (a run may end before one).
     write_curve(&dir, &cfg, &st.evals)?;
+    if let Some(ls) = &lockstep {
+        let (t, r) = ls.pending();
+        info!("deterministic: {} rounds; left outside a round: {t} transitions, {r} episode results; {refused} refused", ls.rounds());
+    }
     let c = &ingest.counts;
     info!("received {} transitions (stored {}, expert held {}, eval {})", c.transitions, c.stored, c.expert_held, c.eval);
     info!("expert transitions dropped (failed episodes) {}, malformed {}; replay {}", c.expert_dropped, c.bad, learner.replay().len());

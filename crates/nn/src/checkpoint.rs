@@ -1,6 +1,9 @@
 //! Save and load network weights as safetensors files with readable parameter names (the module
 //! path, e.g. `enc.convs.0.weight.0`, `q1.conv1.bias.0`).
 //!
+//! The same weights always give the same bytes (file or [`to_bytes`]), so two runs can be compared
+//! file by file.
+//!
 //! Loading checks the file against the module first and refuses a file made for another
 //! architecture, naming the first mismatching tensor (missing, wrong shape or unexpected), so a
 //! mismatch never loads half a network.
@@ -65,9 +68,17 @@ pub fn parameter_shapes<M: Module>(module: &M) -> Vec<(String, Vec<usize>)> {
         .collect()
 }
 
+/// A store for saving with one metadata entry (`format: safetensors`).
+// NOTE: burn's default metadata (format, producer, version) is a HashMap serialised in its random
+// iteration order, so two saves of the same weights differed in their header bytes; with a single
+// entry the header is canonical. The checkpoint manifest records the burn version instead.
+fn canonical(store: SafetensorsStore) -> SafetensorsStore {
+    store.clear_metadata().metadata("format", "safetensors")
+}
+
 /// Save `module`'s parameters to `path` (overwriting an existing file).
 pub fn save<M: Module>(module: &M, path: &Path) -> Result<(), CheckpointError> {
-    let mut store = SafetensorsStore::from_file(path).overwrite(true);
+    let mut store = canonical(SafetensorsStore::from_file(path).overwrite(true));
     module
         .save_into(&mut store)
         .map_err(|e| CheckpointError::Store { path: path.into(), message: e.to_string() })
@@ -83,7 +94,7 @@ pub fn load<M: Module>(module: M, path: &Path) -> Result<M, CheckpointError> {
 pub fn to_bytes<M: Module>(module: &M) -> Result<Vec<u8>, CheckpointError> {
     let label = Path::new("<memory>");
     let store_err = |e: &dyn std::fmt::Display| CheckpointError::Store { path: label.into(), message: e.to_string() };
-    let mut store = SafetensorsStore::from_bytes(None);
+    let mut store = canonical(SafetensorsStore::from_bytes(None));
     module.save_into(&mut store).map_err(|e| store_err(&e))?;
     store.get_bytes().map_err(|e| store_err(&e))
 }

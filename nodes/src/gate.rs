@@ -1,0 +1,178 @@
+//! When the policy node may answer an Observation, without DDS: at once, under flow control
+//! (`--max-lead`, on the trainer's update count from `/trainer/status`), or in the deterministic
+//! lock-step (`--deterministic`, on the version of the weights in use).
+//!
+//! An Observation that may not be answered yet is held (one at a time: the sim waits for its answer,
+//! and a re-publication of the same seq replaces it) and released when a TrainerStatus or new weights
+//! arrive. A re-published seq that was already answered always passes: it gets the same command again.
+//!
+//! Lock-step: the k-th distinct Observation answered (k from 0, expert steps included) is answered
+//! with weights version k + 1 exactly (version 1 is the trainer's initial actor). The trainer publishes
+//! version k + 2 only after round k, which needs this env's k-th transition, so a newer version
+//! cannot arrive first; if one did, the run is no longer deterministic and this is logged as an error.
+
+use anyhow::bail;
+use equiarm_msgs::msg::Observation;
+use log::error;
+
+use crate::policy::Policy;
+
+/// Where a policy stands, as the gate needs it (see [`Policy::progress`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Progress {
+    /// The Observation's seq is the last one answered (a re-publication).
+    pub repeat: bool,
+    /// Answering it is a learned/random policy step (not an expert step), counted by `--max-lead`.
+    pub policy_step: bool,
+    /// Policy steps answered so far.
+    pub policy_steps: u64,
+    /// Distinct Observations answered so far (expert steps included).
+    pub answered: u64,
+    /// Version of the weights in use (0: the node's own initial ones).
+    pub version: u64,
+}
+
+/// The gating rule of one policy node.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Rule {
+    /// Answer every Observation at once.
+    Open,
+    /// `--max-lead`: once a TrainerStatus has been seen, `policy_steps < per_update × updates + max_lead`.
+    Lead {
+        /// Policy steps allowed beyond `per_update × updates`.
+        max_lead: u64,
+        /// Policy steps allowed per trainer update.
+        per_update: u64,
+        /// The trainer's update count (None until the first TrainerStatus).
+        updates: Option<u64>,
+    },
+    /// `--deterministic`: the k-th distinct Observation waits for weights version k + 1.
+    Lockstep,
+}
+
+/// A [`Rule`] and the Observation it holds back.
+#[derive(Debug)]
+pub struct Gate {
+    rule: Rule,
+    held: Option<Observation>,
+    newer_logged: bool,
+}
+
+impl Gate {
+    /// The gate of the policy options: `deterministic` excludes `max_lead > 0` (flow control is the
+    /// lock-step itself then) and needs a mode that takes weights (`learns`).
+    pub fn new(max_lead: u64, steps_per_update: u64, deterministic: bool, learns: bool) -> anyhow::Result<Self> {
+        let rule = match (deterministic, max_lead) {
+            (true, m) if m > 0 => bail!("--deterministic and --max-lead {m} exclude each other: in lock-step the k-th observation waits for weights version k + 1 instead"),
+            (true, _) if !learns => bail!("--deterministic needs --mode sample or greedy (it paces the node by the trainer's weights versions)"),
+            (true, _) => Rule::Lockstep,
+            (false, 0) => Rule::Open,
+            (false, m) => Rule::Lead { max_lead: m, per_update: steps_per_update, updates: None },
+        };
+        Ok(Gate { rule, held: None, newer_logged: false })
+    }
+
+    /// The rule.
+    pub fn rule(&self) -> &Rule {
+        &self.rule
+    }
+
+    /// Whether the rule reads `/trainer/status`.
+    pub fn needs_status(&self) -> bool {
+        matches!(self.rule, Rule::Lead { .. })
+    }
+
+    /// A TrainerStatus said the trainer has made `n` updates.
+    pub fn on_status(&mut self, n: u64) {
+        if let Rule::Lead { updates, .. } = &mut self.rule {
+            *updates = Some(n);
+        }
+    }
+
+    /// Whether an Observation at progress `p` may be answered now.
+    pub fn allows(&mut self, p: Progress, seq: u64) -> bool {
+        if p.repeat {
+            return true;
+        }
+        match self.rule {
+            Rule::Open => true,
+            Rule::Lead { max_lead, per_update, updates } => {
+                !p.policy_step || updates.is_none_or(|u| p.policy_steps < per_update * u + max_lead)
+            }
+            Rule::Lockstep => {
+                let want = p.answered + 1;
+                if p.version > want && !self.newer_logged {
+                    self.newer_logged = true;
+                    error!("lock-step broken: observation {} (seq {seq}) is answered with weights version {}, expected {want}; this run is not deterministic", p.answered, p.version);
+                }
+                p.version >= want
+            }
+        }
+    }
+
+    /// An Observation arrived: returns it if it may be answered now, else holds it (replacing the
+    /// one held).
+    pub fn offer(&mut self, obs: Observation, policy: &Policy) -> Option<Observation> {
+        if self.allows(policy.progress(&obs), obs.seq) {
+            return Some(obs);
+        }
+        self.held = Some(obs);
+        None
+    }
+
+    /// After a TrainerStatus or new weights: the held Observation, if it may be answered now.
+    pub fn release(&mut self, policy: &Policy) -> Option<Observation> {
+        let obs = self.held.take()?;
+        self.offer(obs, policy)
+    }
+
+    /// Whether an Observation is held back.
+    pub fn holds(&self) -> bool {
+        self.held.is_some()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p(answered: u64, version: u64) -> Progress {
+        Progress { answered, version, policy_step: true, policy_steps: answered, repeat: false }
+    }
+
+    #[test]
+    fn lockstep_answers_observation_k_with_version_k_plus_1_only() {
+        let mut g = Gate::new(0, 1, true, true).unwrap();
+        assert_eq!(g.rule(), &Rule::Lockstep);
+        assert!(!g.needs_status());
+        assert!(!g.allows(p(0, 0), 0), "the node's own initial weights are not version 1");
+        assert!(g.allows(p(0, 1), 0));
+        assert!(!g.allows(p(1, 1), 1));
+        assert!(g.allows(p(1, 2), 1));
+        // Expert steps count too: the 5th observation (k = 4) waits for version 5.
+        assert!(!g.allows(Progress { policy_step: false, ..p(4, 4) }, 9));
+        // A re-publication of the seq just answered passes whatever the version.
+        assert!(g.allows(Progress { repeat: true, ..p(5, 5) }, 9));
+        // A newer version than expected is an error in the log, but the node keeps answering.
+        assert!(g.allows(p(2, 7), 3));
+    }
+
+    #[test]
+    fn lead_limits_policy_steps_once_a_status_was_seen() {
+        let mut g = Gate::new(2, 3, false, true).unwrap();
+        assert!(g.needs_status());
+        assert!(g.allows(p(100, 0), 0), "no status yet");
+        g.on_status(1);
+        assert!(g.allows(p(4, 0), 0) && !g.allows(p(5, 0), 0));
+        assert!(g.allows(Progress { policy_step: false, ..p(9, 0) }, 0), "expert steps are not limited");
+        assert_eq!(Gate::new(0, 1, false, false).unwrap().rule(), &Rule::Open);
+    }
+
+    #[test]
+    fn deterministic_refuses_flow_control_and_modes_without_weights() {
+        let e = Gate::new(10, 1, true, true).unwrap_err().to_string();
+        assert!(e.contains("--max-lead 10"), "{e}");
+        let e = Gate::new(0, 1, true, false).unwrap_err().to_string();
+        assert!(e.contains("sample or greedy"), "{e}");
+    }
+}
