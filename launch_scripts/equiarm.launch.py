@@ -5,21 +5,26 @@
     ros2 launch launch_scripts/equiarm.launch.py task:=drawer_opening preset:=paper run_dir:=runs/drawer \
         equiarm:=$HOME/.cache/equiarm/target/release/equiarm
 
-Processes (all `ExecuteProcess`: equiarm is one Rust program, not a ROS package executable):
-- the recorder: `equiarm record --all -q -o <run_dir>/bag`;
+Processes (all `ExecuteProcess`: equiarm is one Rust program, not a ROS package executable), the
+same as `train.sh` starts:
+- the recorder: `equiarm record --all -q -o <run_dir>/bag /episodes:... /transitions:...`;
 - the trainer: `equiarm train --preset P --task T --num-envs N --seed S --run-dir <run_dir>
-  --eval-namespace /eval [--total-updates U] [--model M]` (over DDS); when it exits the whole launch
-  shuts down (the recorder gets SIGINT and closes its bag);
-- N training pairs: `equiarm sim --namespace /envK --task T --seed S+K --resolution FRAME` and
-  `equiarm policy --namespace /envK --mode sample --model M --hidden H --image FRAME:INPUT --seed S+K`;
-- one evaluation pair in /eval: the sim with seed S+1000 and the policy in `--mode greedy`.
+  --eval-namespace /eval [--total-updates U] [--model M] [--deterministic]` (over DDS); when it exits
+  the whole launch shuts down (the recorder gets SIGINT and closes its bag);
+- N training pairs: `equiarm sim --namespace /envK --task T --seed 1000·S+K --resolution FRAME` and
+  `equiarm policy --namespace /envK --mode sample --model M --hidden H --image FRAME:INPUT
+  --seed 1000·S+K --expert-episodes D --max-lead 10` (D: the config's demo episodes spread over the
+  envs; `--deterministic` instead of `--max-lead` with deterministic:=true);
+- one evaluation pair in /eval: the sim with seed 1000·S+999 and `--eval`, the policy in
+  `--mode greedy`, throttled to what the evaluations need.
 FRAME, INPUT and H (and the default model) come from the preset's config,
 `launch_scripts/configs/<preset>_<task>.json` (written by `configs/regenerate.sh` from
 `equiarm train --print-config`), or from the file given as `config:=FILE.json`, which the trainer
 then gets with `--config` instead of `--preset`.
 
 Arguments: task, preset (reduced | paper), num_envs, seed, run_dir, total_updates (empty: the
-preset's), model (empty: the config's), config (empty: the preset's file), equiarm (path of the
+preset's), model (empty: the config's), config (empty: the preset's file), deterministic (true: the
+lock-step mode of `train.sh --deterministic`), equiarm (path of the
 binary; default `equiarm` on PATH). ROS_DOMAIN_ID and the other ROS variables of the environment
 apply to every process. Needs the `launch` package only (launch_ros is not used: no ROS package
 executables are involved); nothing is built here.
@@ -34,17 +39,18 @@ from launch.substitutions import LaunchConfiguration
 
 HERE = os.path.dirname(os.path.realpath(__file__))
 EVAL_NAMESPACE = "/eval"
-EVAL_SEED_OFFSET = 1000
+EVAL_SEED_OFFSET = 999
 
 ARGUMENTS = [
     ("task", "block_pulling", "block_pulling, block_pushing, block_picking, drawer_opening or block_in_bowl"),
     ("preset", "reduced", "reduced (2-core CPU) or paper (PAPER_SPEC sizes)"),
     ("num_envs", "5", "training sim+policy pairs /env0 ... /envN-1"),
-    ("seed", "0", "base seed: env K uses seed+K, the eval env seed+1000"),
+    ("seed", "0", "base seed S: env K uses 1000*S+K, the eval env 1000*S+999 (as train.sh)"),
     ("run_dir", "runs/launch", "run directory of the trainer; the bag goes to <run_dir>/bag"),
     ("total_updates", "", "gradient updates (empty: the preset's)"),
     ("model", "", "equi, cnn or sen (empty: the config's)"),
     ("config", "", "a training config JSON instead of the preset (sizes are read from it)"),
+    ("deterministic", "false", "true: lock-step rounds (train.sh --deterministic)"),
     ("equiarm", "equiarm", "path of the equiarm binary"),
 ]
 
@@ -66,7 +72,9 @@ def commands(args):
     model = args.get("model") or cfg["agent"]["model"]
     image = f"{frame}:{size}"
 
-    cmds = [("recorder", [exe, "record", "--all", "-q", "-o", os.path.join(run_dir, "bag")])]
+    deterministic = str(args.get("deterministic", "false")).lower() in ("1", "true", "yes")
+    recorded = ["/episodes:equiarm_msgs/msg/EpisodeResult", "/transitions:equiarm_msgs/msg/Transition"]
+    cmds = [("recorder", [exe, "record", "--all", "-q", "-o", os.path.join(run_dir, "bag")] + recorded)]
     trainer = [exe, "train"]
     trainer += ["--config", args["config"]] if args.get("config") else ["--preset", preset]
     trainer += ["--task", task, "--num-envs", str(n), "--seed", str(seed), "--run-dir", run_dir,
@@ -75,20 +83,28 @@ def commands(args):
         trainer += ["--total-updates", str(int(args["total_updates"]))]
     if args.get("model"):
         trainer += ["--model", model]
+    if deterministic:
+        trainer.append("--deterministic")
     cmds.append(("trainer", trainer))
 
-    def pair(ns, env_seed, mode):
+    # as train.sh: demos spread over the envs, flow control (or lock-step), a throttled eval pair
+    per_env = (int(cfg["demo_episodes"]) + n - 1) // n
+    pace = ["--deterministic"] if deterministic else ["--max-lead", "10"]
+    eval_rate = (int(cfg["eval_episodes"]) * 50 + int(cfg["eval_every"]) - 1) // (int(cfg["eval_every"]) + 1) + 1
+
+    def pair(ns, env_seed, mode, extra):
         name = ns.strip("/")
         sim = [exe, "sim", "--namespace", ns, "--task", task, "--seed", str(env_seed), "--resolution", str(frame)]
         if ns == EVAL_NAMESPACE:
             sim.append("--eval")  # its EpisodeResults are marked as evaluation episodes
         policy = [exe, "policy", "--namespace", ns, "--mode", mode, "--model", model, "--hidden", str(hidden),
-                  "--image", image, "--seed", str(env_seed)]
+                  "--image", image, "--seed", str(env_seed)] + extra
         return [(f"sim_{name}", sim), (f"policy_{name}", policy)]
 
     for k in range(n):
-        cmds += pair(f"/env{k}", seed + k, "sample")
-    cmds += pair(EVAL_NAMESPACE, seed + EVAL_SEED_OFFSET, "greedy")
+        cmds += pair(f"/env{k}", 1000 * seed + k, "sample", ["--expert-episodes", str(per_env)] + pace)
+    cmds += pair(EVAL_NAMESPACE, 1000 * seed + EVAL_SEED_OFFSET, "greedy",
+                 ["--max-lead", "50", "--steps-per-update", str(eval_rate)])
     return cmds
 
 

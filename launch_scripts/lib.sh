@@ -130,7 +130,7 @@ eqa_recorded_run() {
   trap 'exit 130' INT
   trap 'exit 143' TERM
   # /episodes and /transitions by name, so they are subscribed from the start (`--all` looks for
-  # new topics once a second and can miss a short first episode); everything else through --all.
+  # new topics every 100 ms and can miss the start of a short first episode); the rest through --all.
   eqa_start recorder "$1/logs/record.log" "$EQUIARM_BIN" record --all -q -o "$EQA_BAG" \
     /episodes:equiarm_msgs/msg/EpisodeResult /transitions:equiarm_msgs/msg/Transition
   sleep 1

@@ -206,7 +206,7 @@ def _flag(cmd, name):
 
 def test_launch_file_declares_its_arguments(launch_file):
     declared, _ = launch_file()
-    for name in ("task", "preset", "num_envs", "seed", "run_dir", "total_updates", "equiarm"):
+    for name in ("task", "preset", "num_envs", "seed", "run_dir", "total_updates", "deterministic", "equiarm"):
         assert name in declared
     assert declared["equiarm"] == "equiarm" and declared["preset"] == "reduced"
 
@@ -219,7 +219,8 @@ def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
     assert sorted(procs) == sorted(["recorder", "trainer", "sim_env0", "policy_env0", "sim_env1", "policy_env1",
                                     "sim_env2", "policy_env2", "sim_eval", "policy_eval"])
     assert all(p.kwargs["cmd"][0] == "/opt/eq/equiarm" for p in procs.values())
-    assert procs["recorder"].kwargs["cmd"][1:] == ["record", "--all", "-q", "-o", os.path.join("runs/x", "bag")]
+    assert procs["recorder"].kwargs["cmd"][1:6] == ["record", "--all", "-q", "-o", os.path.join("runs/x", "bag")]
+    assert "/transitions:equiarm_msgs/msg/Transition" in procs["recorder"].kwargs["cmd"]
     tr = procs["trainer"].kwargs["cmd"]
     assert tr[1] == "train" and "--in-process" not in tr
     assert (_flag(tr, "--preset"), _flag(tr, "--task"), _flag(tr, "--num-envs"), _flag(tr, "--seed"),
@@ -229,7 +230,7 @@ def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
     for k, ns in enumerate(["/env0", "/env1", "/env2", "/eval"]):
         name = ns.strip("/")
         sim, pol = procs[f"sim_{name}"].kwargs["cmd"], procs[f"policy_{name}"].kwargs["cmd"]
-        seed = 7 + (1000 if ns == "/eval" else k)
+        seed = 7000 + (999 if ns == "/eval" else k)
         assert sim[1] == "sim" and _flag(sim, "--namespace") == ns and _flag(sim, "--task") == "block_picking"
         assert _flag(sim, "--seed") == str(seed) and _flag(sim, "--resolution") == str(frame)
         assert ("--eval" in sim) == (ns == "/eval")
@@ -237,6 +238,19 @@ def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
         assert _flag(pol, "--mode") == ("greedy" if ns == "/eval" else "sample")
         assert _flag(pol, "--image") == image and _flag(pol, "--hidden") == str(cfg["agent"]["hidden"])
         assert _flag(pol, "--model") == cfg["agent"]["model"]
+        if ns != "/eval":  # demos spread over the 3 envs, flow control on the trainer
+            assert _flag(pol, "--expert-episodes") == str((cfg["demo_episodes"] + 2) // 3)
+            assert _flag(pol, "--max-lead") == "10" and "--deterministic" not in pol
+    assert "--deterministic" not in tr
+
+
+def test_launch_file_deterministic_matches_train_sh(launch_file):
+    _, procs = launch_file(num_envs="2", deterministic="true")
+    assert "--deterministic" in procs["trainer"].kwargs["cmd"]
+    for ns in ("env0", "env1"):
+        pol = procs[f"policy_{ns}"].kwargs["cmd"]
+        assert "--deterministic" in pol and "--max-lead" not in pol
+    assert "--deterministic" not in procs["policy_eval"].kwargs["cmd"]
 
 
 def test_launch_file_paper_preset_and_config_file(launch_file, tmp_path):
