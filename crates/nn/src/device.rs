@@ -132,7 +132,7 @@ pub fn check(device: &Device) -> Result<(), DeviceError> {
         t.sum().try_into_data().map(|d| d.try_to_vec::<f32>().map(|v| v.first().copied()))
     });
     match std::panic::catch_unwind(run) {
-        Ok(Ok(Ok(Some(v)))) if v == 3.0 => Ok(()),
+        Ok(Ok(Ok(Some(3.0)))) => Ok(()),
         Ok(Ok(other)) => Err(unusable(format!("1 + 2 gave {other:?}"))),
         Ok(Err(e)) => Err(unusable(format!("{e:?}"))),
         Err(panic) => {

@@ -308,7 +308,9 @@ pub struct AgentState {
 /// SAC agent over one actor/critic family.
 pub struct Sac<A: ActorNet, C: CriticNet> {
     cfg: AgentConfig,
-    device: Device,
+    /// `plain` with autodiff: where the trained networks live.
+    grad_device: Device,
+    /// The chosen device without autodiff: inputs, targets, Adam moments, inference.
     plain: Device,
     actor: A,
     critic: C,
@@ -349,7 +351,7 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         Ok(Sac {
             log_alpha: cfg.init_alpha.ln(),
             cfg,
-            device,
+            grad_device: device,
             plain,
             actor,
             critic,
@@ -427,7 +429,7 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         if s != self.cfg.input_size {
             return Err(AgentError::Batch(format!("images are {s} px, the networks take {}", self.cfg.input_size)));
         }
-        let dev = self.device.clone();
+        let dev = self.grad_device.clone();
         let plain = self.plain.clone();
         let alpha = self.log_alpha.exp();
         let gamma = self.cfg.gamma;
