@@ -13,9 +13,9 @@
 //!
 //! Limitations: [`parse`] does not open the device; [`open`] and [`check`] do (one tiny
 //! operation), so a missing GPU or driver is reported before a run starts rather than as a panic
-//! inside it. CubeCL
-//! compiles its kernels at run time: the first steps on a GPU are slow. Results on a GPU are not
-//! bit-identical to the CPU's, and GPU runs are not promised to be bitwise repeatable.
+//! inside it. CubeCL compiles its kernels at run time: the first steps on a GPU are slow. Results
+//! on a GPU are not bit-identical to the CPU's, and GPU runs are not promised to be bitwise
+//! repeatable. The CUDA path has not been run on a GPU yet.
 
 use burn::tensor::{Device, Tensor};
 use thiserror::Error;
@@ -67,8 +67,9 @@ pub const fn cuda_enabled() -> bool {
     cfg!(feature = "cuda")
 }
 
-/// The device named `name` (case-insensitive, surrounding blanks ignored): `cpu` (also `flex`, burn's
-/// name for it), `cuda` (device 0) or `cuda:N`. Returns the plain (non-autodiff) device; callers add autodiff where they train.
+/// The device named `name` (case-insensitive, surrounding blanks ignored): `cpu` (also `flex`,
+/// burn's name for it), `cuda` (device 0) or `cuda:N`. Returns the plain (non-autodiff) device;
+/// callers add autodiff where they train.
 pub fn parse(name: &str) -> Result<Device, DeviceError> {
     match choice(name)? {
         Choice::Cpu => Ok(cpu()),
