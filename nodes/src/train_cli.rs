@@ -10,6 +10,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{Context as _, bail};
+use equiarm_nn::burn::tensor::Device;
 use equiarm_sac::agent::ModelKind;
 use equiarm_sac::config::{Augmentation, TrainConfig};
 use equiarm_sac::train::{RunOptions, RunSummary};
@@ -74,6 +75,11 @@ pub struct TrainArgs {
     /// Resume from a checkpoint directory, or from a run directory's latest checkpoint.
     #[arg(long)]
     pub resume: Option<PathBuf>,
+    /// Where the learner's networks run: cpu (default), cuda or cuda:N (an NVIDIA GPU; needs a
+    /// binary built with `--features cuda`; checked at start). Not part of the config: checkpoints
+    /// resume on any.
+    #[arg(long, default_value = "cpu", value_parser = equiarm_nn::device::open)]
+    pub device: Device,
     /// Print the resulting config as JSON and exit.
     #[arg(long)]
     pub print_config: bool,
@@ -151,7 +157,7 @@ pub fn run_in_process(args: &TrainArgs, cfg: TrainConfig) -> anyhow::Result<RunS
         Some(p) => Some(equiarm_sac::train::find_checkpoint(p)?),
         None => None,
     };
-    let opts = RunOptions { run_dir: args.run_dir.clone(), resume, stop_at: None, progress: !args.quiet };
+    let opts = RunOptions { run_dir: args.run_dir.clone(), resume, stop_at: None, progress: !args.quiet, device: args.device.clone() };
     let flag = stop.clone();
     let summary = equiarm_sac::train::run(cfg, &opts, &move || flag.load(Ordering::Relaxed))?;
     Ok(summary)

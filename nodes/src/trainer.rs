@@ -133,7 +133,7 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     let dir = args.run_dir.clone();
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     write_json(&dir.join("config.json"), &cfg).map_err(anyhow::Error::msg)?;
-    let mut learner = Learner::new(cfg.clone())?;
+    let mut learner = Learner::with_device(cfg.clone(), args.device.clone())?;
     let mut st = NodeState::default();
     let mut metrics = match &args.resume {
         Some(p) => {

@@ -1,5 +1,5 @@
 //! Equivariant layers on burn: [`EquivariantConv`] (e2cnn's `R2Conv`), [`relu`],
-//! [`max_pool2`] (e2cnn's `PointwiseMaxPool`), [`group_pool`] (`GroupPooling`), [`concat`]
+//! [`max_pool2`] (e2cnn's `PointwiseMaxPool`), [`group_pool`] (`GroupPooling`), [`concat()`]
 //! (field-type direct sum), and [`transform`], the group action on feature maps used by the
 //! equivariance tests and the diagnostic.
 //!

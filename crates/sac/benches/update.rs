@@ -4,9 +4,11 @@
 //! Prints a table, one `csv,` line per case and the peak RSS.
 //!
 //! `cargo bench -p equiarm_sac --bench update -- [--reps N] [--config paper|reduced|all]
-//!   [--model equi|cnn|sen|all] [--batch B]`
+//!   [--model equi|cnn|sen|all] [--batch B] [--device cpu|cuda[:N]]`
 //! (the bench profile builds burn in release; `--profile dev` gives close figures from the test
 //! build's target directory). Threads: burn-flex uses rayon's pool (`RAYON_NUM_THREADS`).
+//! `--device cuda` needs `--features cuda`; each timed update reads its losses back, so GPU
+//! figures include the synchronisation.
 
 use std::time::Instant;
 
@@ -63,6 +65,9 @@ fn main() {
         _ => vec![ModelKind::Equi, ModelKind::Cnn],
     };
     let batch_override: Option<usize> = arg(&args, "--batch").and_then(|s| s.parse().ok());
+    let device_name = arg(&args, "--device").unwrap_or_else(|| "cpu".into());
+    let device = equiarm_nn::device::open(&device_name).unwrap_or_else(|e| panic!("--device: {e}"));
+    println!("device {device_name} ({device:?})");
     println!("model  config   batch  px   update s (median of {reps})   act b1 s");
     for cfg_name in &configs {
         for &model in &models {
@@ -74,7 +79,7 @@ fn main() {
             let hidden = arg(&args, "--hidden").and_then(|v| v.parse().ok()).unwrap_or(hidden);
             let s = arg(&args, "--px").and_then(|v| v.parse().ok()).unwrap_or(s);
             let cfg = AgentConfig { model, hidden, input_size: s, ..AgentConfig::default() };
-            let mut agent = Agent::new(cfg, 0).expect("agent");
+            let mut agent = Agent::new_on(cfg, 0, &device).expect("agent");
             let data = batch(b, s, 3);
             let mut times = Vec::new();
             for i in 0..=reps {

@@ -14,6 +14,11 @@
 //!
 //! Noise comes from the agent's own seeded RNG, so updates are bitwise repeatable on one machine.
 //!
+//! Device: [`Agent::new`] builds on the CPU (`flex`); [`Agent::new_on`] on any device of
+//! [`equiarm_nn::device`] (e.g. a CUDA GPU with the `cuda` feature). Everything the agent makes
+//! lives there: weights, inputs, noise, Adam moments, loaded checkpoints. Noise is drawn on the
+//! host from the same RNG on every device, and checkpoints load across devices.
+//!
 //! Limitations: the importance-sampling weights of PER are applied only when
 //! [`AgentConfig::use_is_weights`] is set (the paper computes them and does not use them).
 
@@ -51,6 +56,9 @@ pub enum AgentError {
     /// Optimiser state could not be saved or loaded.
     #[error(transparent)]
     Optim(#[from] crate::optim::OptimError),
+    /// The device cannot be used.
+    #[error(transparent)]
+    Device(#[from] equiarm_nn::device::DeviceError),
     /// The agent state file is missing or wrong.
     #[error("{path}: {message}")]
     State {
@@ -300,7 +308,9 @@ pub struct AgentState {
 /// SAC agent over one actor/critic family.
 pub struct Sac<A: ActorNet, C: CriticNet> {
     cfg: AgentConfig,
-    device: Device,
+    /// `plain` with autodiff: where the trained networks live.
+    grad_device: Device,
+    /// The chosen device without autodiff: inputs, targets, Adam moments, inference.
     plain: Device,
     actor: A,
     critic: C,
@@ -318,9 +328,16 @@ pub struct Sac<A: ActorNet, C: CriticNet> {
 pub type Builder<T> = fn(&NetConfig, &Init, &Device) -> Result<T, equiarm_nn::nets::NetError>;
 
 impl<A: ActorNet, C: CriticNet> Sac<A, C> {
-    /// A fresh agent: weights from `Init::new(seed)`, noise RNG from `seed`.
+    /// A fresh agent on the CPU (`flex`): weights from `Init::new(seed)`, noise RNG from `seed`.
     pub fn build(cfg: AgentConfig, seed: u64, actor: Builder<A>, critic: Builder<C>) -> Result<Self, AgentError> {
-        let plain = Device::flex();
+        Self::build_on(cfg, seed, &equiarm_nn::device::cpu(), actor, critic)
+    }
+
+    /// A fresh agent on `device` (with or without autodiff; the agent adds it for training), after
+    /// [`equiarm_nn::device::check`] has opened it.
+    pub fn build_on(cfg: AgentConfig, seed: u64, device: &Device, actor: Builder<A>, critic: Builder<C>) -> Result<Self, AgentError> {
+        equiarm_nn::device::check(device)?;
+        let plain = device.clone().without_autodiff();
         let device = plain.clone().autodiff();
         let net = cfg.net_config();
         let init = Init::new(seed);
@@ -334,7 +351,7 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         Ok(Sac {
             log_alpha: cfg.init_alpha.ln(),
             cfg,
-            device,
+            grad_device: device,
             plain,
             actor,
             critic,
@@ -356,6 +373,11 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
     /// Updates made.
     pub fn updates(&self) -> u64 {
         self.updates
+    }
+
+    /// The device the agent's tensors live on (without autodiff).
+    pub fn device(&self) -> &Device {
+        &self.plain
     }
 
     /// Current α.
@@ -407,7 +429,7 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         if s != self.cfg.input_size {
             return Err(AgentError::Batch(format!("images are {s} px, the networks take {}", self.cfg.input_size)));
         }
-        let dev = self.device.clone();
+        let dev = self.grad_device.clone();
         let plain = self.plain.clone();
         let alpha = self.log_alpha.exp();
         let gamma = self.cfg.gamma;
@@ -617,13 +639,24 @@ macro_rules! each {
 }
 
 impl Agent {
-    /// A fresh agent of `cfg.model`, weights and noise seeded with `seed`.
+    /// A fresh agent of `cfg.model` on the CPU (`flex`), weights and noise seeded with `seed`.
     pub fn new(cfg: AgentConfig, seed: u64) -> Result<Self, AgentError> {
+        Self::new_on(cfg, seed, &equiarm_nn::device::cpu())
+    }
+
+    /// A fresh agent of `cfg.model` on `device` (see [`equiarm_nn::device`]), weights and noise
+    /// seeded with `seed`. On the CPU this is [`Agent::new`], bit for bit.
+    pub fn new_on(cfg: AgentConfig, seed: u64, device: &Device) -> Result<Self, AgentError> {
         Ok(match cfg.model {
-            ModelKind::Equi => Agent::Equi(Sac::build(cfg, seed, EquiActor::new, EquiCritic::new)?),
-            ModelKind::Cnn => Agent::Cnn(Sac::build(cfg, seed, CnnActor::new, CnnCritic::new)?),
-            ModelKind::Sen => Agent::Sen(Sac::build(cfg, seed, SenActor::new, SenCritic::new)?),
+            ModelKind::Equi => Agent::Equi(Sac::build_on(cfg, seed, device, EquiActor::new, EquiCritic::new)?),
+            ModelKind::Cnn => Agent::Cnn(Sac::build_on(cfg, seed, device, CnnActor::new, CnnCritic::new)?),
+            ModelKind::Sen => Agent::Sen(Sac::build_on(cfg, seed, device, SenActor::new, SenCritic::new)?),
         })
+    }
+
+    /// See [`Sac::device`].
+    pub fn device(&self) -> &Device {
+        each!(self, a => a.device())
     }
 
     /// Configuration.
@@ -787,6 +820,21 @@ mod tests {
             let x = &data.obs[..5 * 64];
             assert_eq!(a.act(x, 1, ActMode::Greedy, None).unwrap(), b.act(x, 1, ActMode::Greedy, None).unwrap());
         }
+    }
+
+    #[test]
+    fn an_agent_built_on_the_cpu_device_is_the_default_agent() {
+        // `new_on` with the CPU device (given with or without autodiff) is `new`, bit for bit.
+        let data = batch(6, 8, 4);
+        let mut a = Agent::new(tiny(ModelKind::Cnn), 2).unwrap();
+        let mut b = Agent::new_on(tiny(ModelKind::Cnn), 2, &Device::flex().autodiff()).unwrap();
+        assert_eq!(b.device(), &Device::flex());
+        assert!(!b.device().is_autodiff());
+        for _ in 0..2 {
+            assert_eq!(a.update(&data).unwrap(), b.update(&data).unwrap());
+        }
+        let x = &data.obs[..5 * 64];
+        assert_eq!(a.act(x, 1, ActMode::Sample, None).unwrap(), b.act(x, 1, ActMode::Sample, None).unwrap());
     }
 
     #[test]

@@ -6,10 +6,14 @@
 //! versions, counters). [`Learner::resume`] refuses a manifest whose config differs from the run's
 //! (other than `total_updates`, which may be extended), naming the first differing field.
 //!
+//! The device (CPU or a GPU, [`Learner::with_device`]) is not part of the config: a checkpoint
+//! written on one device resumes on another.
+//!
 //! Limitations: frames must all have the configured `image_size`.
 
 use std::path::{Path, PathBuf};
 
+use equiarm_nn::burn::tensor::Device;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -93,10 +97,17 @@ pub struct Learner {
 }
 
 impl Learner {
-    /// A fresh learner for `cfg` (validated here).
+    /// A fresh learner for `cfg` (validated here), its agent on the CPU (`flex`).
     pub fn new(cfg: TrainConfig) -> Result<Self, LearnerError> {
+        Self::with_device(cfg, equiarm_nn::device::cpu())
+    }
+
+    /// A fresh learner for `cfg` (validated here), its agent on `device` (see
+    /// [`equiarm_nn::device`]; checked before the networks are built). Replay, crops and the
+    /// sampling RNG stay on the host.
+    pub fn with_device(cfg: TrainConfig, device: Device) -> Result<Self, LearnerError> {
         cfg.validate()?;
-        let agent = Agent::new(cfg.agent.clone(), cfg.seed)?;
+        let agent = Agent::new_on(cfg.agent.clone(), cfg.seed, &device)?;
         let replay = Replay::new(cfg.replay.clone())?;
         let beta = Linear { start: cfg.replay.beta_start, end: cfg.replay.beta_end, steps: cfg.total_updates };
         Ok(Learner { rng: crate::rng::stream(cfg.seed, 0x7265_706c), cfg, agent, replay, beta, transitions: 0, last: None })

@@ -104,7 +104,8 @@ impl Adam {
     }
 
     /// Load state saved by [`Adam::save`] for `module` (every moment must name one of its
-    /// parameters with the same shape).
+    /// parameters with the same shape), the moments on `device` (the module's device, without
+    /// autodiff).
     pub fn load<M: Module>(params: AdamParams, module: &M, path: &Path, device: &Device) -> Result<Self, OptimError> {
         let fmt = |message: String| OptimError::Format { path: path.into(), message };
         let file = crate::tensorfile::read(path).map_err(|e| match e {
@@ -179,6 +180,7 @@ impl ModuleMapper for AdamMapper<'_> {
         let device = tensor.device();
         let require_grad = tensor.is_require_grad();
         let g: Tensor<1> = grad.inner().reshape([n]);
+        // New moments live where the gradient does: the agent's device, without autodiff.
         let plain_device = g.device();
         let (m, v) = match self.moments.remove(&name) {
             Some((_, m, v)) => (m, v),

@@ -7,7 +7,7 @@
 //! Exact resume: a checkpoint also records, per env, the seed of its current episode and the
 //! actions taken in it so far; resuming resets each env with that seed and replays the actions
 //! (the simulator is deterministic), so K updates straight and K/2 + checkpoint + resume + K/2
-//! give bit-identical weights on one machine.
+//! give bit-identical weights on one machine (tested on the CPU; [`RunOptions::device`] picks a GPU).
 //!
 //! Episode seeds: training episode `e` of env `i` uses [`episode_seed`]`(seed, i, e)`; demos use
 //! env index `u32::MAX`; evaluation episode `j` uses `episode_seed(seed ^ EVAL, 0, j)`, the same at
@@ -20,6 +20,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
+use equiarm_nn::burn::tensor::Device;
 use equiarm_sim::{Action, Env, EnvConfig, Observation, TaskKind, ViewPreset};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -206,8 +207,8 @@ pub struct RunSummary {
     pub demos: (usize, usize),
 }
 
-/// Options of one invocation (not part of the config: they do not change the result).
-#[derive(Clone, Debug, Default)]
+/// Options of one invocation (not part of the config: a checkpoint resumes under other options).
+#[derive(Clone, Debug)]
 pub struct RunOptions {
     /// Run directory (created).
     pub run_dir: PathBuf,
@@ -217,6 +218,16 @@ pub struct RunOptions {
     pub stop_at: Option<u64>,
     /// Show a progress line on stderr.
     pub progress: bool,
+    /// Where the agent's tensors live (default: the CPU, `flex`). A GPU's results are not
+    /// bit-identical to the CPU's; exact resume is tested on the CPU.
+    pub device: Device,
+}
+
+impl Default for RunOptions {
+    fn default() -> Self {
+        // Not `Device::default()`: that is the GPU in a build with the `cuda` feature.
+        RunOptions { run_dir: PathBuf::new(), resume: None, stop_at: None, progress: false, device: equiarm_nn::device::cpu() }
+    }
 }
 
 /// Run (or resume) a training run. `stop` is polled between steps (Ctrl-C): when it turns true
@@ -225,7 +236,7 @@ pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Resu
     let io = |path: &Path, e: &dyn std::fmt::Display| TrainError::Io { path: path.into(), message: e.to_string() };
     std::fs::create_dir_all(&opts.run_dir).map_err(|e| io(&opts.run_dir, &e))?;
     let started = Instant::now();
-    let mut learner = Learner::new(cfg.clone())?;
+    let mut learner = Learner::with_device(cfg.clone(), opts.device.clone())?;
     let env_cfg = env_config(&cfg);
     let n = cfg.num_envs;
     let mut eval_envs: Vec<Env> = (0..n).map(|_| Env::new(env_cfg.clone())).collect::<Result<_, _>>()?;
