@@ -4,6 +4,10 @@
 //! expert weight (first argument: a multiplier, default 1).
 //!
 //! `cargo run -p equiarm_sac --example bc_check -- [WEIGHT] [UPDATES] [FRAME:INPUT] [HIDDEN] [MODEL]`
+//!
+//! Environment: `DEMOS=K` demo episodes (default the config's), `EVAL_EVERY=U` also runs the greedy
+//! policy on the config's evaluation episodes in the simulator every U updates (the success rate
+//! a policy fitted to the demos alone reaches).
 use equiarm_sac::config::TrainConfig;
 use equiarm_sac::learner::Learner;
 
@@ -23,6 +27,10 @@ fn main() {
         cfg.agent.model = equiarm_sac::agent::ModelKind::parse(m).unwrap();
     }
     cfg.agent.expert_weight = w;
+    if let Some(k) = std::env::var("DEMOS").ok().and_then(|v| v.parse().ok()) {
+        cfg.demo_episodes = k;
+    }
+    let eval_every: u64 = std::env::var("EVAL_EVERY").ok().and_then(|v| v.parse().ok()).unwrap_or(0);
     let mut l = Learner::new(cfg.clone()).unwrap();
     let env_cfg = equiarm_sac::train::env_config(&cfg);
     let (tried, kept) = equiarm_sac::train::collect_demos(&mut l, &env_cfg).unwrap();
@@ -46,8 +54,13 @@ fn main() {
         se.map(|x| (x / rows.len() as f64 * 1000.0).round() / 1000.0)
     };
     println!("greedy mse per dim before {:?}", greedy(&mut l));
+    let mut envs: Vec<equiarm_sim::Env> = (0..cfg.num_envs).map(|_| equiarm_sim::Env::new(env_cfg.clone()).unwrap()).collect();
     for u in 1..=n {
         let m = l.update().unwrap();
+        if eval_every > 0 && u % eval_every == 0 {
+            let e = equiarm_sac::train::evaluate(&mut l, &mut envs, cfg.eval_episodes).unwrap();
+            println!("{u} eval success {:.2} over {} episodes, mean length {:.1}", e.success_rate, e.episodes, e.mean_length);
+        }
         if u % 20 == 0 || u == 1 {
             if u % 40 == 0 { println!("greedy mse per dim {:?}", greedy(&mut l)); }
             println!("{u} expert {:.3} actor {:.3} q {:.3} qloss {:.3} entropy {:.1}", m.expert_loss, m.actor_loss, m.qf1_values, m.qf1_loss, m.entropy);

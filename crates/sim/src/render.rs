@@ -6,8 +6,11 @@
 //! edge functions. Depth is computed exactly per pixel from the triangle's plane (ray–plane
 //! intersection), so on planar faces it equals the ray-cast depth to float precision. Shading is flat
 //! Lambert (0.35 ambient + 0.65 n·l) with one fixed directional light; faces are lit from the side that
-//! faces the camera. The table top can be painted with a checkerboard (world xy, 0.1 m tiles, a
-//! symmetry breaker like BulletArm's checker plane).
+//! faces the camera. The table top can be painted with BulletArm's floor: pybullet_data's
+//! `plane.urdf` (`plane100.obj`, `checker_blue.png`), i.e. 1 m tiles in world xy, light blue
+//! (173, 199, 239) where ⌊x⌋ + ⌊y⌋ is odd and white where it is even. In the paper's oblique view the
+//! edge at y = 0 runs down the middle of the image (light blue on the left, y < 0), and the x = 0 edge
+//! crosses its top rows: a symmetry breaker, measured against pybullet's TinyRenderer.
 //!
 //! Limitations: curved shapes (cylinders, balls, capsules) are tessellated (32 segments), so they
 //! deviate from the ray cast by up to ~0.5 % of their radius; the bundled assets use boxes only.
@@ -78,7 +81,8 @@ impl Frame {
 pub const BACKGROUND: [u8; 3] = [170, 180, 190];
 const AMBIENT: f32 = 0.35;
 const DIFFUSE: f32 = 0.65;
-const CHECKER_TILE: f32 = 0.1;
+/// Tile size of BulletArm's floor: `plane100.obj` maps its 2 m × 2 m texture (2 × 2 tiles) 100 times.
+const CHECKER_TILE: f32 = 1.0;
 
 fn light_dir() -> Vector {
     Vector::new(0.3, 0.2, 1.0).normalize()
@@ -89,7 +93,8 @@ fn shade(color: [f32; 3], normal: Vector) -> [u8; 3] {
     color.map(|c| (c * k * 255.0).round().clamp(0.0, 255.0) as u8)
 }
 
-const CHECKER_DARK: [f32; 3] = [0.35, 0.45, 0.85];
+/// The blue tiles of pybullet_data's `checker_blue.png`: (173, 199, 239) / 255.
+const CHECKER_DARK: [f32; 3] = [173.0 / 255.0, 199.0 / 255.0, 239.0 / 255.0];
 
 fn checker_odd(p: Vector) -> bool {
     let i = (p.x / CHECKER_TILE).floor() as i64 + (p.y / CHECKER_TILE).floor() as i64;

@@ -234,6 +234,31 @@ fn holding_flag_follows_the_grasp() {
     assert!(!o.holding);
 }
 
+/// BulletArm's floor (pybullet's `plane.urdf`) has 1 m tiles: in the default oblique view of the
+/// workspace, a row through the middle of the image crosses one tile edge, at the centre column
+/// (world y = 0), light blue on the left (y < 0) and white on the right. Pybullet's TinyRenderer gives
+/// (162, 186, 224) and (239, 239, 239) there at 152 px, with the edge at column 76.
+#[test]
+fn floor_is_bulletarm_plane_one_metre_tiles() {
+    let mut env = Env::new(EnvConfig::new(TaskKind::BlockPulling)).unwrap();
+    let o = env.reset(5).unwrap();
+    let n = o.width;
+    let table = env.segmentation_names().iter().position(|s| s == "table").unwrap() as u16;
+    let row = n / 2;
+    let px = |c: usize| {
+        let i = row * n + c;
+        (o.segmentation[i] == table).then(|| [o.color[i * 3], o.color[i * 3 + 1], o.color[i * 3 + 2]])
+    };
+    let (left, right) = (px(4).unwrap(), px(n - 5).unwrap());
+    let near = |a: [u8; 3], b: [u8; 3]| a.iter().zip(b).all(|(x, y)| (*x as i32 - y as i32).abs() <= 12);
+    assert!(near(left, [162, 186, 224]), "left of the y = 0 edge {left:?}");
+    assert!(near(right, [239, 239, 239]), "right of the y = 0 edge {right:?}");
+    let floor: Vec<(usize, [u8; 3])> = (0..n).filter_map(|c| px(c).map(|p| (c, p))).collect();
+    let edges: Vec<usize> = floor.windows(2).filter(|w| w[0].1 != w[1].1).map(|w| w[1].0).collect();
+    assert_eq!(edges.len(), 1, "one tile edge on the middle row, found at columns {edges:?}");
+    assert!(edges[0].abs_diff(n / 2) <= 1, "the edge is at column {} of {n}", edges[0]);
+}
+
 #[test]
 fn gripper_only_scene_has_a_plain_floor() {
     let floor_colours = |gripper_only: bool| {
