@@ -253,7 +253,7 @@ fn bag_play_lockstep_waits_for_the_command_naming_each_observation() {
     }
     w.finish().unwrap();
 
-    let player = play(84, &bag, &["--lockstep", "300", "--wait-ms", "2000", "--remap", "/env0/observation:/ls/observation"]);
+    let mut player = play(84, &bag, &["--lockstep", "300", "--wait-ms", "2000", "--remap", "/env0/observation:/ls/observation"]);
     let rt = tokio::runtime::Runtime::new().unwrap();
     let seen = rt.block_on(async {
         let mut node = RosNode::new("/", "policy", &RosOptions { domain_id: 84, localhost_only: false }).unwrap();
@@ -270,6 +270,14 @@ fn bag_play_lockstep_waits_for_the_command_naming_each_observation() {
                 continue;
             }
             cmds.publish(cmd(obs.seq)).await.unwrap();
+        }
+        // Stay up (answering re-publications) until the player is done: dropping the node right
+        // after the last command can lose it on a loaded machine.
+        let start = Instant::now();
+        while player.try_wait().unwrap().is_none() && start.elapsed() < Duration::from_secs(20) {
+            if let Some((obs, _)) = sub.recv_timeout(Duration::from_millis(100)).await.unwrap() {
+                cmds.publish(cmd(obs.seq)).await.unwrap();
+            }
         }
         seen
     });

@@ -1,6 +1,10 @@
 //! `equiarm bag play`: re-publishes a bag's messages on their recorded topics (or remapped ones) at
 //! the recorded pace scaled by `--rate`, with each topic's recorded QoS reliability.
 //!
+//! With `--lockstep`, playing starts once a publisher of each `gripper_cmd` topic has appeared (at
+//! most 30 s), and each Observation is re-published until the command naming its seq arrives (10
+//! tries, then it is skipped).
+//!
 //! ## Limitations
 //! Only types equiarm knows can be played (`equiarm msg list`); messages of other types are counted
 //! and skipped. Messages go out in file order (the order they were received when recorded).
@@ -111,6 +115,13 @@ pub async fn run(opts: &RosOptions, cfg: PlayConfig) -> anyhow::Result<(u64, u64
                 answers.insert(topic.clone(), node.subscription::<GripperCommand>(&cmd_topic, qos::command())?);
                 info!("lock-step: {to} waits for {cmd_topic}");
             }
+        }
+    }
+    // Lock-step needs someone to answer: wait (up to 30 s) for a publisher on each gripper_cmd topic
+    // (a loaded machine can take seconds to discover it), then the usual match delay.
+    for (topic, sub) in &answers {
+        if !node.wait_for_publisher(sub, Duration::from_secs(30)).await {
+            warn!("lock-step: nothing publishes the gripper commands answering {topic} yet; playing anyway");
         }
     }
     tokio::time::sleep(cfg.wait_for_match).await;
