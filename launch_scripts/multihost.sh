@@ -130,6 +130,13 @@ if command -v ping >/dev/null; then
   done
 fi
 
+report_traffic() {  # bytes and packets each host's eth0 received and sent (the traffic went over the veths)
+  local ns
+  for ns in "${HOSTS[@]}"; do
+    eqa_log "$ns eth0: $(ip -n "$ns" -s link show eth0 | awk 'f == 1 { rx = $1 " B / " $2 " packets" } f == 2 { tx = $1 " B / " $2 " packets" } /RX:/ { f = 1; next } /TX:/ { f = 2; next } { f = 0 } END { print "received " rx ", sent " tx }')"
+  done
+}
+
 start_in() {  # start_in NAME NS cmd...
   local name=$1 ns=$2
   shift 2
@@ -165,9 +172,7 @@ if [ $check -eq 1 ]; then
   fi
   sleep 2
   eqa_stop_all
-  for ns in "${HOSTS[@]}"; do  # the traffic went over the veths
-    eqa_log "$ns eth0: $(ip -n "$ns" -s link show eth0 | awk 'f == 1 { rx = $1 " B / " $2 " packets" } f == 2 { tx = $1 " B / " $2 " packets" } /RX:/ { f = 1; next } /TX:/ { f = 2; next } { f = 0 } END { print "received " rx ", sent " tx }')"
-  done
+  report_traffic
   "$EQUIARM_BIN" bag info "$bag" | grep -E 'Messages|/episodes|/transitions|/env0/(observation|gripper_cmd)' || true
   [ $status -eq 0 ] && echo "multihost.sh: discovery across the veths: OK" || echo "multihost.sh: discovery check FAILED"
   exit $status
@@ -180,10 +185,12 @@ model=$(eqa_config_get "$cfg" model)
 train=("$EQUIARM_BIN" train --preset "$preset" --task "$task" --num-envs 2 --eval-every 0 --run-dir "$out/run" -q)
 [ -z "$total_updates" ] || train+=(--total-updates "$total_updates")
 start_in trainer eqa-trainer "${train[@]}"
+# as train.sh: the config's demos spread over the 2 envs (expert first), flow control on the trainer
+per_env=$(( ($(eqa_config_get "$cfg" demo_episodes) + 1) / 2 ))
 k=0
 for ns in eqa-actor1 eqa-actor2; do
   start_in "policy_env$k" "$ns" "$EQUIARM_BIN" policy --namespace "/env$k" --mode sample --model "$model" \
-    --hidden "$hidden" --image "$image" --seed "$k"
+    --hidden "$hidden" --image "$image" --seed "$k" --expert-episodes "$per_env" --max-lead 10
   start_in "sim_env$k" "$ns" "$EQUIARM_BIN" sim --namespace "/env$k" --task "$task" --seed "$k" --resolution "$frame"
   k=$((k + 1))
 done
@@ -215,5 +222,12 @@ if ! eqa_running trainer; then
 fi
 eqa_stop trainer  # first, so that it writes its checkpoint while the actors still run
 eqa_stop_all
+# what crossed the veths: the trainer's counts, the weights each actor host switched to, the traffic
+grep -h "received .* transitions\|stopping (" "$out/logs/trainer.log" | sed 's/^/  trainer: /' >&2 || true
+for k in 0 1; do
+  switches=$(grep 'weights version [0-9]* (updates' "$out/logs/policy_env$k.log" || true)
+  echo "  policy_env$k: $(printf '%s' "$switches" | grep -c . || true) weights loaded, last: $(printf '%s' "$switches" | tail -1 | sed 's/.*\] //')" >&2
+done
+report_traffic
 "$EQUIARM_BIN" bag info "$bag" | grep -E 'Messages|/episodes|/transitions|/policy' || true
 exit $status
