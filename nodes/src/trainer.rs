@@ -22,8 +22,8 @@
 //!   rounds: it acts on whatever weights are current, so evaluations are not reproducible.
 //!
 //! ## Limitations
-//! EpisodeResults count as evaluation when `eval` is set or their env is the eval env (the sim node
-//! does not set `eval`). Resume restores the learner, metrics and weights version, not held demos;
+//! EpisodeResults count as evaluation when `eval` is set (`equiarm sim --eval`) or their env is the
+//! eval env; transitions only by their env. Resume restores the learner, metrics and weights version, not held demos;
 //! `--deterministic` refuses `--resume`. In lock-step a lost transition or an env that stops stalls
 //! the rounds (logged with what the round waits for) until the idle timeout.
 
