@@ -41,7 +41,7 @@ enum Command {
     ///
     /// Writes metrics.csv/jsonl (CleanRL names), learning_curve.png, checkpoints/ and config.json into
     /// --run-dir; prints an evaluation table at the end. Ctrl-C stops with a checkpoint; --resume continues.
-    Train(equiarm_nodes::train_cli::TrainArgs),
+    Train(Box<equiarm_nodes::train_cli::TrainArgs>),
     /// Policy node: answers each Observation on `observation` (relative to --namespace) with a
     /// GripperCommand on `gripper_cmd` naming its seq: the actor's sampled or greedy action, the
     /// expert's, or a random one. In sample/greedy mode it takes new actor weights from
