@@ -289,15 +289,15 @@ fn the_policy_refuses_foreign_weights_and_answers_a_repeated_seq_identically() {
     let data = Agent::new(arch, 99).unwrap().actor_bytes().unwrap();
     let weights = |version, model: &str, format: &str, data: Vec<u8>| PolicyWeights { version, updates: 3, model: model.into(), format: format.into(), data, ..Default::default() };
 
-    let o = policy.on_weights(&weights(5, "cnn", "safetensors", data.clone()));
+    let o = policy.on_weights(weights(5, "cnn", "safetensors", data.clone()));
     assert!(matches!(&o, WeightsOutcome::Refused(why) if why.contains("'cnn'")), "{o:?}");
-    let o = policy.on_weights(&weights(5, "equi", "npz", data.clone()));
+    let o = policy.on_weights(weights(5, "equi", "npz", data.clone()));
     assert!(matches!(&o, WeightsOutcome::Refused(why) if why.contains("npz")), "{o:?}");
     assert_eq!(policy.version(), 0);
     let before = policy.answer(&observation("env0", 0, 0, 40)).unwrap();
-    assert_eq!(policy.on_weights(&weights(2, "equi", "safetensors", data.clone())), WeightsOutcome::Loaded);
-    assert_eq!(policy.on_weights(&weights(2, "equi", "safetensors", data.clone())), WeightsOutcome::Stale);
-    let o = policy.on_weights(&weights(3, "equi", "safetensors", b"not safetensors".to_vec()));
+    assert_eq!(policy.on_weights(weights(2, "equi", "safetensors", data.clone())), WeightsOutcome::Loaded);
+    assert_eq!(policy.on_weights(weights(2, "equi", "safetensors", data.clone())), WeightsOutcome::Stale);
+    let o = policy.on_weights(weights(3, "equi", "safetensors", b"not safetensors".to_vec()));
     assert!(matches!(o, WeightsOutcome::Failed(_)), "{o:?}");
     assert_eq!(policy.version(), 2, "a bad payload keeps the old weights");
 

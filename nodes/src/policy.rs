@@ -177,8 +177,8 @@ impl Policy {
         Some((at(0.5), at(0.95)))
     }
 
-    /// Takes new weights if they are ours and newer.
-    pub fn on_weights(&mut self, w: &PolicyWeights) -> WeightsOutcome {
+    /// Takes new weights if they are ours and newer (the payload moves into the actor, uncopied).
+    pub fn on_weights(&mut self, w: PolicyWeights) -> WeightsOutcome {
         let Some(agent) = self.agent.as_mut() else { return WeightsOutcome::Refused(format!("mode {:?} takes no weights", self.mode)) };
         let ours = agent.config().model.name();
         if ModelKind::parse(&w.model) != Some(agent.config().model) {
@@ -191,7 +191,7 @@ impl Policy {
             return WeightsOutcome::Stale;
         }
         let label = format!("PolicyWeights version {}", w.version);
-        match agent.load_actor_bytes(w.data.clone(), &label).map_err(|e| e.to_string()) {
+        match agent.load_actor_bytes(w.data, &label).map_err(|e| e.to_string()) {
             Ok(()) => {
                 self.version = w.version;
                 WeightsOutcome::Loaded
@@ -226,12 +226,13 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
             r = obs_sub.recv() => gate.offer(r?.0, &policy),
             r = recv_some(weights_sub.as_ref()) => {
                 let (w, _) = r?;
-                match policy.on_weights(&w) {
+                let (version, updates) = (w.version, w.updates);
+                match policy.on_weights(w) {
                     // In lock-step a new version comes every round: log the first and every 100th.
-                    WeightsOutcome::Loaded if !args.deterministic || w.version % 100 == 1 => info!("weights version {} (updates {})", w.version, w.updates),
+                    WeightsOutcome::Loaded if !args.deterministic || version % 100 == 1 => info!("weights version {version} (updates {updates})"),
                     WeightsOutcome::Loaded | WeightsOutcome::Stale => {}
-                    WeightsOutcome::Refused(why) => if refused.insert(why.clone()) { warn!("refusing weights version {}: {why}", w.version) },
-                    WeightsOutcome::Failed(why) => warn!("weights version {} did not load, keeping version {}: {why}", w.version, policy.version()),
+                    WeightsOutcome::Refused(why) => if refused.insert(why.clone()) { warn!("refusing weights version {version}: {why}") },
+                    WeightsOutcome::Failed(why) => warn!("weights version {version} did not load, keeping version {}: {why}", policy.version()),
                 }
                 gate.release(&policy)
             }

@@ -102,6 +102,16 @@ fn ingest_episode(ingest: &mut Ingest, r: &EpisodeResult, queue: &mut Vec<Stored
     Ok(())
 }
 
+/// Lock-step: counts a message the rounds refused and logs it (the 1st, 2nd, 4th, 8th, …).
+fn log_refused(r: Result<(), String>, refused: &mut u64) {
+    if let Err(e) = r {
+        *refused += 1;
+        if refused.is_power_of_two() {
+            warn!("{e} ({refused} refused so far)");
+        }
+    }
+}
+
 /// Lock-step: a transition a sim sends before it has matched this trainer's reader is lost and
 /// stalls every round, so the first weights (which start the envs) wait until `/transitions` and
 /// `/episodes` have at least `n` writers each and their counts held still for a second (at most 60 s).
@@ -223,12 +233,8 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
                 // Lock-step: the training envs' messages wait for their round.
                 Ok(t) if lockstep.is_some() && !ingest.is_eval(&t.obs.env) => {
                     last_tr = Some(Instant::now());
-                    if let Err(e) = lockstep.as_mut().expect("checked").transition(t) {
-                        refused += 1;
-                        if refused.is_power_of_two() {
-                            warn!("{e} ({refused} refused so far)");
-                        }
-                    }
+                    let r = lockstep.as_mut().expect("checked").transition(t);
+                    log_refused(r, &mut refused);
                 }
                 Ok(t) => {
                     last_tr = Some(Instant::now());
@@ -260,14 +266,7 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
                     }
                 }
                 Err(r) => match lockstep.as_mut() {
-                    Some(ls) => {
-                        if let Err(e) = ls.episode(r) {
-                            refused += 1;
-                            if refused.is_power_of_two() {
-                                warn!("{e} ({refused} refused so far)");
-                            }
-                        }
-                    }
+                    Some(ls) => log_refused(ls.episode(r), &mut refused),
                     None => ingest_episode(&mut ingest, &r, &mut queue, &mut metrics, st.global_step, wall(&started))?,
                 },
             }
@@ -297,27 +296,27 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
             home = Some(learner);
         }
         if let Some(learner) = home.as_mut() {
+            // Lock-step: one complete round at a time, in order; then its update or its weights.
+            let round = match lockstep.as_mut().filter(|_| stopping.is_none()).and_then(Lockstep::next_round) {
+                Some(items) => {
+                    for item in items {
+                        match item {
+                            Item::Transition(t) => {
+                                ingest_transition(&mut ingest, &t, &mut queue, &mut bad_logged);
+                                st.global_step += 1;
+                            }
+                            Item::Episode(r) => ingest_episode(&mut ingest, &r, &mut queue, &mut metrics, st.global_step, wall(&started))?,
+                        }
+                    }
+                    true
+                }
+                None => false,
+            };
             for row in queue.drain(..) {
                 learner.push(row)?;
             }
             let mut update = false;
-            // Lock-step: one complete round at a time, in order; then its update or its weights.
-            if let Some(ls) = lockstep.as_mut()
-                && stopping.is_none()
-                && let Some(items) = ls.next_round()
-            {
-                for item in items {
-                    match item {
-                        Item::Transition(t) => {
-                            ingest_transition(&mut ingest, &t, &mut queue, &mut bad_logged);
-                            st.global_step += 1;
-                        }
-                        Item::Episode(r) => ingest_episode(&mut ingest, &r, &mut queue, &mut metrics, st.global_step, wall(&started))?,
-                    }
-                }
-                for row in queue.drain(..) {
-                    learner.push(row)?;
-                }
+            if round {
                 last_round = Instant::now();
                 update = learner.ready() && learner.updates() < cfg.total_updates;
                 if !update {
