@@ -83,8 +83,9 @@ fn main() {
             let data = batch(b, s, 3);
             let mut times = Vec::new();
             for i in 0..=reps {
+                let copy = data.clone();
                 let t = Instant::now();
-                agent.update(&data).expect("update");
+                agent.update(copy).expect("update");
                 if i > 0 {
                     times.push(t.elapsed().as_secs_f64());
                 }

@@ -421,9 +421,10 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         Ok(v.chunks_exact(5).map(|c| [c[0], c[1], c[2], c[3], c[4]]).collect())
     }
 
-    /// One SAC update (critic → actor → α → target). Returns the metrics and the TD error per
-    /// row (mean over the M copies), for PER priorities.
-    pub fn update(&mut self, batch: &Batch) -> Result<(Metrics, Vec<f32>), AgentError> {
+    /// One SAC update (critic → actor → α → target) on `batch`, which it consumes (its images
+    /// become the input tensors without a copy). Returns the metrics and the TD error per row (mean
+    /// over the M copies), for PER priorities.
+    pub fn update(&mut self, mut batch: Batch) -> Result<(Metrics, Vec<f32>), AgentError> {
         batch.check()?;
         let (b, s, m, k) = (batch.b, batch.s, batch.m, batch.k);
         if s != self.cfg.input_size {
@@ -437,7 +438,8 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         let repeat = |v: &[f32], times: usize| -> Vec<f32> { (0..times).flat_map(|_| v.iter().copied()).collect() };
 
         // --- critic target (no gradients): mean over the K next-observation crops.
-        let next = self.image(&batch.next_obs, k * b, s, &plain);
+        // The images move into the tensors (no copy of the batch's largest arrays).
+        let next = Tensor::<4>::from_data(TensorData::new(std::mem::take(&mut batch.next_obs), [k * b, 5, s, s]), &plain);
         let eps_next = self.normal(k * b * 5);
         let actor_plain = self.actor.valid();
         let (mn, ls) = actor_plain.forward(next.clone());
@@ -449,7 +451,7 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         let y_m: Tensor<2> = Tensor::cat(vec![y; m], 0); // [m·b, 1]
 
         // --- critic step on the M observation crops.
-        let obs = self.image(&batch.obs, m * b, s, &dev);
+        let obs = Tensor::<4>::from_data(TensorData::new(std::mem::take(&mut batch.obs), [m * b, 5, s, s]), &dev);
         let action = Tensor::<2>::from_data(TensorData::new(repeat(&batch.action, m), [m * b, 5]), &dev);
         let (q1, q2) = self.critic.forward(obs.clone(), action);
         let y_ad = Tensor::from_inner(y_m.clone());
@@ -680,7 +682,7 @@ impl Agent {
     }
 
     /// See [`Sac::update`].
-    pub fn update(&mut self, batch: &Batch) -> Result<(Metrics, Vec<f32>), AgentError> {
+    pub fn update(&mut self, batch: Batch) -> Result<(Metrics, Vec<f32>), AgentError> {
         each!(self, a => a.update(batch))
     }
 
@@ -807,15 +809,15 @@ mod tests {
             let data = batch(8, 8, 1);
             let mut a = Agent::new(tiny(model), 3).unwrap();
             let mut b = Agent::new(tiny(model), 3).unwrap();
-            let first = a.update(&data).unwrap().0;
+            let first = a.update(data.clone()).unwrap().0;
             let mut last = first;
             for _ in 0..30 {
-                last = a.update(&data).unwrap().0;
+                last = a.update(data.clone()).unwrap().0;
             }
             assert!(last.qf1_loss < first.qf1_loss, "{model:?}: critic loss {} → {}", first.qf1_loss, last.qf1_loss);
             assert!(last.expert_loss < first.expert_loss, "{model:?}: expert loss {} → {}", first.expert_loss, last.expert_loss);
             for _ in 0..31 {
-                b.update(&data).unwrap();
+                b.update(data.clone()).unwrap();
             }
             let x = &data.obs[..5 * 64];
             assert_eq!(a.act(x, 1, ActMode::Greedy, None).unwrap(), b.act(x, 1, ActMode::Greedy, None).unwrap());
@@ -831,7 +833,7 @@ mod tests {
         assert_eq!(b.device(), &Device::flex());
         assert!(!b.device().is_autodiff());
         for _ in 0..2 {
-            assert_eq!(a.update(&data).unwrap(), b.update(&data).unwrap());
+            assert_eq!(a.update(data.clone()).unwrap(), b.update(data.clone()).unwrap());
         }
         let x = &data.obs[..5 * 64];
         assert_eq!(a.act(x, 1, ActMode::Sample, None).unwrap(), b.act(x, 1, ActMode::Sample, None).unwrap());
@@ -842,9 +844,9 @@ mod tests {
         let mut a = Agent::new(tiny(ModelKind::Cnn), 0).unwrap();
         let mut data = batch(4, 8, 0);
         data.reward.pop();
-        assert!(matches!(a.update(&data), Err(AgentError::Batch(_))));
+        assert!(matches!(a.update(data.clone()), Err(AgentError::Batch(_))));
         let data = batch(4, 16, 0);
-        assert!(matches!(a.update(&data), Err(AgentError::Batch(_))));
+        assert!(matches!(a.update(data.clone()), Err(AgentError::Batch(_))));
         assert!(a.act(&[0.0; 7], 1, ActMode::Greedy, None).is_err());
     }
 
@@ -855,18 +857,18 @@ mod tests {
         let batches: Vec<Batch> = (0..6).map(|i| batch(6, 8, 10 + i)).collect();
         let mut straight = Agent::new(tiny(ModelKind::Equi), 5).unwrap();
         for b in &batches {
-            straight.update(b).unwrap();
+            straight.update(b.clone()).unwrap();
         }
         let mut first = Agent::new(tiny(ModelKind::Equi), 5).unwrap();
         for b in &batches[..3] {
-            first.update(b).unwrap();
+            first.update(b.clone()).unwrap();
         }
         first.save(&dir).unwrap();
         drop(first);
         let mut resumed = Agent::new(tiny(ModelKind::Equi), 99).unwrap();
         resumed.load(&dir).unwrap();
         for b in &batches[3..] {
-            resumed.update(b).unwrap();
+            resumed.update(b.clone()).unwrap();
         }
         let (p1, p2) = (dir.join("a.safetensors"), dir.join("b.safetensors"));
         straight.save_actor(&p1).unwrap();

@@ -170,7 +170,7 @@ impl Learner {
         let beta = self.beta.value(self.agent.updates());
         let sample = self.replay.sample(self.cfg.batch_size, beta, &mut self.rng)?;
         let batch = self.build_batch(&sample.slots, &sample.weights)?;
-        let (metrics, td) = self.agent.update(&batch)?;
+        let (metrics, td) = self.agent.update(batch)?;
         self.replay.update_priorities(&sample.slots, &td)?;
         self.last = Some(metrics);
         Ok(metrics)
