@@ -142,6 +142,14 @@ eqa_config_get() {
   sed -n "s/^ *\"$2\": *\"\{0,1\}\([^\",]*\)\"\{0,1\},\{0,1\} *\$/\1/p" "$1" | head -n 1
 }
 
+# eqa_demos_per_env FILE N: the config's demo episodes spread over N envs (rounded up, so at least
+# one each): every training policy answers that many first episodes with the expert.
+eqa_demos_per_env() {
+  local demos
+  demos=$(eqa_config_get "$1" demo_episodes)
+  echo $(( (demos + $2 - 1) / $2 ))
+}
+
 # eqa_wait_sims TIMEOUT_S LOGDIR SIM...: waits until every named sim process has exited; fails (1) on
 # a timeout, a sim's non-zero exit, or a policy_* / recorder process dying while sims still run.
 eqa_wait_sims() {

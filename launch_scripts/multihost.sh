@@ -186,7 +186,7 @@ train=("$EQUIARM_BIN" train --preset "$preset" --task "$task" --num-envs 2 --eva
 [ -z "$total_updates" ] || train+=(--total-updates "$total_updates")
 start_in trainer eqa-trainer "${train[@]}"
 # as train.sh: the config's demos spread over the 2 envs (expert first), flow control on the trainer
-per_env=$(( ($(eqa_config_get "$cfg" demo_episodes) + 1) / 2 ))
+per_env=$(eqa_demos_per_env "$cfg" 2)
 k=0
 for ns in eqa-actor1 eqa-actor2; do
   start_in "policy_env$k" "$ns" "$EQUIARM_BIN" policy --namespace "/env$k" --mode sample --model "$model" \

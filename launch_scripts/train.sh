@@ -68,9 +68,8 @@ cfg_args=(--preset "$preset" --task "$task" --num-envs "$num_envs" --seed "$seed
 "$bin" train "${cfg_args[@]}" "${extra[@]}" --print-config > "$run_dir/config.json"
 cfg_get() { eqa_config_get "$run_dir/config.json" "$1"; }
 image=$(cfg_get image_size) input=$(cfg_get input_size) hidden=$(cfg_get hidden) model=$(cfg_get model)
-demos=$(cfg_get demo_episodes)
-# demo episodes are spread over the envs (at least one each); unsuccessful ones are dropped
-per_env=$(( (demos + num_envs - 1) / num_envs ))
+# demo episodes spread over the envs (at least one each); the trainer drops unsuccessful ones
+per_env=$(eqa_demos_per_env "$run_dir/config.json" "$num_envs")
 arch=(--model "$model" --hidden "$hidden" --image "$image:$input")
 # training policies: flow control on the trainer's update count, or the lock-step on weights versions
 pace=(--max-lead 10) trainer_mode=()
