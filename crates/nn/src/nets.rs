@@ -6,8 +6,9 @@
 //! - [`SenActor`], [`SenCritic`]: SEN fc2, a CNN encoder with equivariant heads (§1.9).
 //! - [`RotEquiNet`], [`RotCnnNet`]: the C8 rotation-estimation classifiers (§4).
 //!
-//! Input size: `8·2^p` pixels with `0 ≤ p ≤ 4` (128 in the paper); the first `p` of encoder layers
-//! 1–4 end with a 2×2 max-pool so that the map is 8×8 before the unpadded tail (8 → 6 → 3 → 1).
+//! Input size: `8·2^p` pixels with `0 ≤ p ≤ 4` (128 in the paper). The paper's encoders pool
+//! 128 → 8 in their first four layers before an unpadded tail (8 → 6 → 3 → 1); a smaller input
+//! drops the first `4 − p` layers, as the authors' `EquivariantEncoder64` drops the 128×128 one.
 //! At 128 px the layer structure is exactly the paper's. Actions are `(p, dx, dy, dz, dθ)`
 //! (PAPER_SPEC §1.2).
 //!
@@ -67,12 +68,12 @@ impl NetConfig {
         NetConfig { hidden: 64, input_size: 128, in_channels: 8 }
     }
 
-    /// Reduced CPU config: hidden 16, 64 px, 5 channels (same layer structure, one pool fewer).
+    /// Reduced CPU config: hidden 16, 64 px, 5 channels (the paper layers from 64×64 on).
     pub const fn reduced_cpu() -> Self {
         NetConfig { hidden: 16, input_size: 64, in_channels: 5 }
     }
 
-    /// Number of 2×2 pools in layers 1–4.
+    /// Number of 2×2 pools before the 8×8 map: `input_size = 8·2^p`.
     fn pools(&self) -> Result<usize, NetError> {
         if self.hidden == 0 || !self.hidden.is_multiple_of(8) {
             return Err(NetError::Config(format!("hidden size {} must be a positive multiple of 8", self.hidden)));
@@ -84,6 +85,24 @@ impl NetConfig {
             .find(|&p| 8 << p == self.input_size)
             .ok_or_else(|| NetError::Config(format!("input size {} must be 8, 16, 32, 64 or 128", self.input_size)))
     }
+
+    /// The layers a 128 px encoder keeps at this input size, as `(width, pad, pool after)`.
+    ///
+    /// `layers` are the paper's layers at 128 px, whose first four each end with a 2×2 pool
+    /// (128 → 8). At `8·2^p` px the first `4 − p` of them are dropped, the rule of the authors'
+    /// own smaller encoders (`EquivariantEncoder64` is `EquivariantEncoder128` minus its 128×128
+    /// layer): every kept layer runs at the resolution, and with the width, it has in the paper.
+    fn kept<const L: usize>(&self, layers: [(usize, usize, bool); L]) -> Result<Vec<(usize, usize, bool)>, NetError> {
+        let p = self.pools()?;
+        Ok(layers[4 - p..].to_vec())
+    }
+}
+
+/// The paper's 7-layer encoders at 128 px as `(width, pad, pool after)`: 3×3 convs, layers 1–4
+/// padded and pooled (128 → 8), layer 5 padded at 8×8, layer 6 unpadded (8 → 6) and pooled, layer 7
+/// unpadded (3 → 1).
+fn paper_layers(w: [usize; 7]) -> [(usize, usize, bool); 7] {
+    [(w[0], 1, true), (w[1], 1, true), (w[2], 1, true), (w[3], 1, true), (w[4], 1, false), (w[5], 0, true), (w[6], 0, false)]
 }
 
 /// The 7-layer equivariant encoder `EquivariantEncoder128` (PAPER_SPEC §1.4 layers 1–7).
@@ -100,19 +119,16 @@ pub struct EquiEncoder {
 impl EquiEncoder {
     /// Build for `group` (D4 for SAC, C8 for rotation estimation).
     pub fn new(path: &str, group: Group, cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
-        let p = cfg.pools()?;
         let n = cfg.hidden;
-        let fields = [n / 8, n / 4, n / 2, n, 2 * n, n, n];
-        let pads = [1, 1, 1, 1, 1, 0, 0];
-        let pools = vec![p > 0, p > 1, p > 2, p > 3, false, true, false];
+        let layers = cfg.kept(paper_layers([n / 8, n / 4, n / 2, n, 2 * n, n, n]))?;
         let mut in_type = FieldType::trivial(group, cfg.in_channels);
         let mut convs = Vec::new();
-        for (i, (&f, &pad)) in fields.iter().zip(&pads).enumerate() {
+        for (i, &(f, pad, _)) in layers.iter().enumerate() {
             let out_type = FieldType::regular(group, f);
             convs.push(EquivariantConv::new(&format!("{path}.convs.{i}"), &in_type, &out_type, 3, pad, init, device)?);
             in_type = out_type;
         }
-        Ok(EquiEncoder { convs, pools, out_fields: n })
+        Ok(EquiEncoder { convs, pools: layers.iter().map(|l| l.2).collect(), out_fields: n })
     }
 
     /// `[B, in_channels, S, S] → [B, 8·hidden (|G|·hidden), 1, 1]`.
@@ -308,16 +324,14 @@ pub struct CnnEncoder {
 
 impl CnnEncoder {
     fn new(path: &str, cfg: &NetConfig, widths: [usize; 7], init: &Init, device: &Device) -> Result<Self, NetError> {
-        let p = cfg.pools()?;
-        let pads = [1, 1, 1, 1, 1, 0, 0];
-        let pools = vec![p > 0, p > 1, p > 2, p > 3, false, true, false];
+        let layers = cfg.kept(paper_layers(widths))?;
         let mut cin = cfg.in_channels;
         let mut convs = Vec::new();
-        for (i, (&w, &pad)) in widths.iter().zip(&pads).enumerate() {
+        for (i, &(w, pad, _)) in layers.iter().enumerate() {
             convs.push(Conv::new(&format!("{path}.convs.{i}"), cin, w, 3, pad, init, device));
             cin = w;
         }
-        Ok(CnnEncoder { convs, pools })
+        Ok(CnnEncoder { convs, pools: layers.iter().map(|l| l.2).collect() })
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
@@ -428,18 +442,17 @@ pub struct SenEncoder {
 
 impl SenEncoder {
     fn new(path: &str, cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
-        let p = cfg.pools()?;
         let n = cfg.hidden;
-        let widths = [n / 2, n, 2 * n, 4 * n, 2 * n];
-        let pools = vec![p > 0, p > 1, p > 2, p > 3, false];
+        let w = [n / 2, n, 2 * n, 4 * n, 2 * n];
+        let layers = cfg.kept([(w[0], 1, true), (w[1], 1, true), (w[2], 1, true), (w[3], 1, true), (w[4], 1, false)])?;
         let mut cin = cfg.in_channels;
         let mut convs = Vec::new();
-        for (i, &w) in widths.iter().enumerate() {
-            convs.push(Conv::new(&format!("{path}.convs.{i}"), cin, w, 3, 1, init, device));
+        for (i, &(w, pad, _)) in layers.iter().enumerate() {
+            convs.push(Conv::new(&format!("{path}.convs.{i}"), cin, w, 3, pad, init, device));
             cin = w;
         }
         let fc = Linear::new(&format!("{path}.fc"), 2 * n * 64, 8 * n, init, device);
-        Ok(SenEncoder { convs, fc, pools })
+        Ok(SenEncoder { convs, fc, pools: layers.iter().map(|l| l.2).collect() })
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
@@ -553,18 +566,15 @@ pub struct RotCnnNet {
 impl RotCnnNet {
     /// Build with weights from `init` (paper: [`NetConfig::paper_rotation`]).
     pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
-        let p = cfg.pools()?;
         let n = cfg.hidden;
-        let widths = [n / 4, n / 2, n, 2 * n, 4 * n, 4 * n, 2 * n];
-        let pads = [1, 1, 1, 1, 1, 0, 0];
-        let pools = vec![p > 0, p > 1, p > 2, p > 3, false, true, false];
+        let layers = cfg.kept(paper_layers([n / 4, n / 2, n, 2 * n, 4 * n, 4 * n, 2 * n]))?;
         let mut cin = cfg.in_channels;
         let mut convs = Vec::new();
-        for (i, (&w, &pad)) in widths.iter().zip(&pads).enumerate() {
+        for (i, &(w, pad, _)) in layers.iter().enumerate() {
             convs.push(Conv::new(&format!("convs.{i}"), cin, w, 3, pad, init, device));
             cin = w;
         }
-        Ok(RotCnnNet { convs, head: Conv::new("head", cin, 8, 1, 0, init, device), pools })
+        Ok(RotCnnNet { convs, head: Conv::new("head", cin, 8, 1, 0, init, device), pools: layers.iter().map(|l| l.2).collect() })
     }
 
     /// `[B, in_channels, S, S] → logits [B, 8]`.

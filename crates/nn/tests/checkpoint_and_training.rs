@@ -94,7 +94,7 @@ fn same_seed_gives_identical_weights_and_outputs() {
     assert_ne!(values(ma), values(mc));
 }
 
-/// Adam steps through the kernel expansion: the loss changes, the runs are bitwise repeatable,
+/// Adam steps (at SAC's learning rate, 1e-3) through the kernel expansion: the loss decreases, the runs are bitwise repeatable,
 /// and the trained network is still equivariant.
 #[test]
 fn adam_steps_are_deterministic_and_keep_equivariance() {
@@ -110,7 +110,7 @@ fn adam_steps_are_deterministic_and_keep_equivariance() {
             let loss = (mean - target.clone()).powf_scalar(2.0).mean();
             losses.push(values(loss.clone())[0]);
             let grads = GradientsParams::from_grads(loss.backward(), &actor);
-            actor = optim.step(1e-2, actor, grads);
+            actor = optim.step(1e-3, actor, grads);
         }
         (losses, actor)
     };

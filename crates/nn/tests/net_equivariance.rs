@@ -84,7 +84,7 @@ fn c8_rotation_net_is_invariant_under_quarter_turns() {
     }
 }
 
-/// Equivariance also holds at a reduced input size (the CPU config's 64 px, 3 pools).
+/// Equivariance also holds at a reduced input size (64 px: the paper layers from 64×64 on).
 #[test]
 fn equi_actor_reduced_input_size_is_equivariant() {
     let dev = device();

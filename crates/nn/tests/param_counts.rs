@@ -49,3 +49,27 @@ fn invalid_configs_are_refused() {
     let bad_hidden = NetConfig { hidden: 12, input_size: 128, in_channels: 5 };
     assert!(CnnActor::new(&bad_hidden, &init, &dev).is_err());
 }
+
+/// A smaller input keeps the paper encoder's layers from that resolution on (the authors'
+/// `EquivariantEncoder64` rule): at 32 px the Equi encoder is layers 3–7 (n/2, n, 2n, n, n
+/// regular D4 fields), the CNN encoder layers 3–7 (n, 2n, 2n, 4n, 4n channels), each from the
+/// 5 input planes, and every map still ends at 1×1.
+#[test]
+fn smaller_inputs_drop_the_leading_layers() {
+    let (dev, init) = (device(), Init::new(0));
+    let cfg = NetConfig { hidden: 8, input_size: 32, in_channels: 5 };
+    let actor = EquiActor::new(&cfg, &init, &dev).unwrap();
+    let widths: Vec<(usize, usize)> = actor.enc.convs.iter().map(|c| (c.in_channels(), c.out_channels())).collect();
+    assert_eq!(widths, [(5, 32), (32, 64), (64, 128), (128, 64), (64, 64)]);
+    let cnn = CnnActor::new(&cfg, &init, &dev).unwrap();
+    assert_eq!(cnn.enc.convs.len(), 5);
+    let x = equiarm_nn::burn::tensor::Tensor::<4>::zeros([2, 5, 32, 32], &dev);
+    let (m, s) = actor.forward(x.clone());
+    assert_eq!((m.dims(), s.dims()), ([2, 5], [2, 5]));
+    let (m, _) = cnn.forward(x);
+    assert_eq!(m.dims(), [2, 5]);
+    for (size, layers) in [(8, 3), (16, 4), (64, 6), (128, 7)] {
+        let c = NetConfig { input_size: size, ..cfg };
+        assert_eq!(EquiActor::new(&c, &init, &dev).unwrap().enc.convs.len(), layers, "{size} px");
+    }
+}
