@@ -60,9 +60,12 @@ def patch_e2cnn():
 CONFIGS = {"paper": (64, 128), "reduced": (16, 64)}  # (hidden, input size), as NetConfig
 
 
-def pools_for(size):
+def kept_layers(widths, size):
+    """The paper's 128 px layers as (width, pad, pool after), minus the first 4 - p of them at
+    8 * 2^p px (the authors' EquivariantEncoder64 rule, as equiarm's NetConfig)."""
     p = {8: 0, 16: 1, 32: 2, 64: 3, 128: 4}[size]
-    return [p > 0, p > 1, p > 2, p > 3, False, True, False]
+    layers = list(zip(widths, [1, 1, 1, 1, 1, 0, 0], [True, True, True, True, False, True, False]))
+    return layers[4 - p:]
 
 
 def equi_actor(hidden, size, in_ch=5):
@@ -72,7 +75,7 @@ def equi_actor(hidden, size, in_ch=5):
     t_in = enn.FieldType(g, in_ch * [g.trivial_repr])
     input_type = t_in
     layers = []
-    for f, pad, pool in zip([n // 8, n // 4, n // 2, n, 2 * n, n, n], [1, 1, 1, 1, 1, 0, 0], pools_for(size)):
+    for f, pad, pool in kept_layers([n // 8, n // 4, n // 2, n, 2 * n, n, n], size):
         t_out = enn.FieldType(g, f * [g.regular_repr])
         layers += [enn.R2Conv(t_in, t_out, kernel_size=3, padding=pad), enn.ReLU(t_out, inplace=True)]
         if pool:
@@ -93,7 +96,7 @@ def cnn_actor(hidden, size, in_ch=5):
     n = hidden
     widths = [n // 4, n // 2, n, 2 * n, 2 * n, 4 * n, 4 * n]
     layers, c = [], in_ch
-    for w, pad, pool in zip(widths, [1, 1, 1, 1, 1, 0, 0], pools_for(size)):
+    for w, pad, pool in kept_layers(widths, size):
         layers += [nn.Conv2d(c, w, 3, padding=pad), nn.ReLU(inplace=True)]
         if pool:
             layers.append(nn.MaxPool2d(2))

@@ -69,7 +69,7 @@ fn main() {
         });
     }
     let chart = Chart {
-        title: format!("greedy evaluation {metric} (mean ± s.e.)"),
+        title: format!("greedy evaluation {metric} (mean +/- standard error over seeds)"),
         x_label: "gradient updates".into(),
         y_label: metric.clone(),
         y_range: Some((0.0, 1.0)),

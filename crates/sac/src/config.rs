@@ -123,11 +123,12 @@ impl TrainConfig {
     }
 
     /// The reduced CPU settings for `task`: the paper's algorithm, with 38 px frames cropped
-    /// to 32 (the same 0.84 crop ratio as 152 → 128), hidden 8 (an eighth of the fields), batch
-    /// 64, evaluation over 20 episodes every 100 updates, and a quarter of the updates. Chosen for
-    /// speed: an update takes ~0.6 s on 2 cores, so block pulling's 1,250 updates fit in ~15 min
-    /// (`cargo bench -p equiarm_sac --bench update`). Larger reduced sizes (76 → 64 px, hidden
-    /// 16) cost 3–6× more per update and learned no faster within the same wall time.
+    /// to 32 (the same 0.84 crop ratio as 152 → 128), hidden 8 (an eighth of the fields; at 32 px
+    /// the networks are the paper's layers from 32×32 on), batch 64, evaluation over 20 episodes
+    /// every 100 updates, and a quarter of the updates. Chosen for speed: an Equi update takes
+    /// ~0.64 s on 2 cores (CNN 0.14 s), so block pulling's 1,250 updates fit in ~17 min
+    /// (`cargo bench -p equiarm_sac --bench update`). 76 → 64 px costs ~1.5× per update and
+    /// hidden 16 ~4×; neither learned faster per update in our screens.
     pub fn reduced(task: &str) -> Self {
         let paper = TrainConfig::paper(task);
         TrainConfig {

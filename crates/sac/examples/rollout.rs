@@ -1,0 +1,48 @@
+//! Diagnostic: greedy rollouts of a checkpoint, printing per step the gripper position, the
+//! greedy action and the expert's action for the same observation.
+//!
+//! `cargo run -p equiarm_sac --example rollout -- RUN_DIR [EPISODES]`
+use equiarm_sac::agent::ActMode;
+use equiarm_sac::config::TrainConfig;
+use equiarm_sac::learner::{read_json, Learner};
+use equiarm_sim::Action;
+
+fn main() {
+    let a: Vec<String> = std::env::args().skip(1).collect();
+    let Some(dir) = a.first().map(std::path::PathBuf::from) else {
+        eprintln!("usage: rollout RUN_DIR [EPISODES]");
+        std::process::exit(2);
+    };
+    if let Err(e) = run(&dir, a.get(1).and_then(|s| s.parse().ok()).unwrap_or(3)) {
+        eprintln!("rollout: {}: {e}", dir.display());
+        std::process::exit(1);
+    }
+}
+
+fn run(dir: &std::path::Path, episodes: u64) -> Result<(), Box<dyn std::error::Error>> {
+    let cfg: TrainConfig = read_json(&dir.join("config.json"))?;
+    let mut l = Learner::new(cfg.clone())?;
+    l.resume(&equiarm_sac::train::find_checkpoint(dir)?)?;
+    let mut env = equiarm_sim::Env::new(equiarm_sac::train::env_config(&cfg))?;
+    let mut wins = 0;
+    for ep in 0..episodes {
+        let mut o = env.reset(equiarm_sac::train::episode_seed(cfg.seed ^ equiarm_sac::train::EVAL, 0, ep))?;
+        println!("episode {ep}");
+        for t in 0..cfg.max_episode_steps {
+            let f = equiarm_sac::train::frame_of(&o)?;
+            let g = l.act(&[&f], ActMode::Greedy)?[0];
+            let e = o.expert_action.to_normalized();
+            println!("  t{t:02} tcp [{:.3} {:.3} {:.3}] greedy [{:+.2} {:+.2} {:+.2} {:+.2} {:+.2}] expert [{:+.2} {:+.2} {:+.2} {:+.2} {:+.2}]",
+                o.tcp[0], o.tcp[1], o.tcp[2], g[0], g[1], g[2], g[3], g[4], e[0], e[1], e[2], e[3], e[4]);
+            let r = env.step(&Action::from_normalized(g))?;
+            if r.done {
+                println!("  done success {}", r.info.success);
+                wins += r.info.success as u32;
+                break;
+            }
+            o = r.observation;
+        }
+    }
+    println!("{wins}/{episodes}");
+    Ok(())
+}
