@@ -112,6 +112,26 @@ eqa_exit_status() {
   return 127
 }
 
+# eqa_pid NAME: the pid (= process group id) of the process started as NAME.
+eqa_pid() {
+  local i
+  for i in "${!EQA_NAMES[@]}"; do
+    [ "${EQA_NAMES[$i]}" = "$1" ] && { echo "${EQA_PIDS[$i]}"; return 0; }
+  done
+  return 1
+}
+
+# eqa_wait_log NAME LOG PATTERN TIMEOUT_S: waits until LOG contains PATTERN (0); 1 when NAME exits
+# first or the timeout passes.
+eqa_wait_log() {
+  local deadline=$((SECONDS + $4))
+  until grep -q -- "$3" "$2" 2>/dev/null; do
+    eqa_running "$1" || return 1
+    [ $SECONDS -ge $deadline ] && return 1
+    sleep 0.2
+  done
+}
+
 eqa_on_exit() {
   local rc=$?
   trap - EXIT INT TERM

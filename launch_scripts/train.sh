@@ -8,8 +8,9 @@
 #   - N sim+policy pairs  /env0 … /envN-1 (the policy answers the first --demo-episodes episodes of
 #                         each env with the expert, then samples from the learned actor)
 #   - one eval pair       /eval (greedy policy; its episodes are the trainer's evaluations)
-# waits for the trainer to finish, stops every process cleanly (also on Ctrl-C: SIGINT, then
-# SIGKILL after 10 s), and prints the evaluation table and where the bag, checkpoints, metrics and
+# (in that order: the pairs' policies before their sims, see below), follows the trainer's output
+# until it finishes, stops every process cleanly (also on Ctrl-C: SIGINT, the trainer then saves a
+# checkpoint; SIGKILL after EQA_STOP_TIMEOUT_S, default 30 s), and prints the evaluation table and where the bag, checkpoints, metrics and
 # learning curve are.
 #
 # Options (defaults: the reduced CPU config of block pulling, 5 envs, seed 0):
@@ -55,6 +56,7 @@ run_dir=${run_dir:-runs/$task-$(date +%Y%m%d-%H%M%S)}
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0}
 export ROS_LOCALHOST_ONLY=${ROS_LOCALHOST_ONLY:-1}
 export RUST_LOG=${RUST_LOG:-warn,equiarm=info,equiarm_nodes=info}
+export EQA_STOP_TIMEOUT_S=${EQA_STOP_TIMEOUT_S:-30}
 
 source launch_scripts/lib.sh
 eqa_bin
@@ -83,20 +85,32 @@ else
   mkdir -p "$run_dir/logs"
   trap eqa_on_exit EXIT; trap 'exit 130' INT; trap 'exit 143' TERM
 fi
+# Start order: the recorder, the trainer, the policies, then the sims. Without multicast on the
+# loopback interface (Linux's default `lo`) RustDDS discovers same-host participants by unicast to the
+# first 12 participant ids only, so two participants started 13th and later never discover each
+# other: those must be sims, which talk only to their policy, the trainer and the recorder.
+start trainer "$bin" train --config "$run_dir/config.json" --run-dir "$run_dir" --eval-namespace /eval "${trainer_mode[@]}" "${extra[@]}"
+eqa_wait_log trainer "$run_dir/logs/trainer.log" "joined ROS 2 domain" 120 \
+  || { eqa_log "the trainer did not join the ROS 2 graph; see $run_dir/logs/trainer.log"; tail -n 20 "$run_dir/logs/trainer.log" >&2; exit 1; }
 for i in $(seq 0 $((num_envs - 1))); do
-  start "sim$i" "$bin" sim --namespace "/env$i" --task "$task" --seed $((seed * 1000 + i)) --resolution "$image"
   start "policy$i" "$bin" policy --namespace "/env$i" --mode sample "${arch[@]}" --seed $((seed * 1000 + i)) --expert-episodes "$per_env" "${pace[@]}"
 done
-start sim_eval "$bin" sim --namespace /eval --eval --task "$task" --seed $((seed * 1000 + 999)) --resolution "$image"
 # the eval pair may run about eval_episodes × 50 steps per eval_every updates
 eval_rate=$(( ($(cfg_get eval_episodes) * 50 + $(cfg_get eval_every) - 1) / ($(cfg_get eval_every) + 1) + 1 ))
 start policy_eval "$bin" policy --namespace /eval --mode greedy "${arch[@]}" --seed $((seed * 1000 + 999)) --max-lead 50 --steps-per-update "$eval_rate"
+for i in $(seq 0 $((num_envs - 1))); do
+  start "sim$i" "$bin" sim --namespace "/env$i" --task "$task" --seed $((seed * 1000 + i)) --resolution "$image"
+done
+start sim_eval "$bin" sim --namespace /eval --eval --task "$task" --seed $((seed * 1000 + 999)) --resolution "$image"
 
-# The trainer runs in the foreground (its progress line on this terminal).
+# The trainer's output (its progress line) follows on this terminal until it exits.
+tail -n +1 -f --pid="$(eqa_pid trainer)" "$run_dir/logs/trainer.log" >&2 &
+while eqa_running trainer; do sleep 0.5; done
 set +e
-"$bin" train --config "$run_dir/config.json" --run-dir "$run_dir" --eval-namespace /eval "${trainer_mode[@]}" "${extra[@]}" 2> >(tee "$run_dir/logs/trainer.log" >&2)
+eqa_exit_status trainer
 status=$?
 set -e
+wait 2>/dev/null || true
 echo "== training finished (exit $status); stopping the suite"
 eqa_stop_all
 if [ $record = 1 ] && [ -d "$run_dir/bag" ]; then
