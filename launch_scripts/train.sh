@@ -105,12 +105,13 @@ start sim_eval "$bin" sim --namespace /eval --eval --task "$task" --seed $((seed
 
 # The trainer's output (its progress line) follows on this terminal until it exits.
 tail -n +1 -f --pid="$(eqa_pid trainer)" "$run_dir/logs/trainer.log" >&2 &
+follow=$!
 while eqa_running trainer; do sleep 0.5; done
 set +e
 eqa_exit_status trainer
 status=$?
+wait "$follow" 2>/dev/null
 set -e
-wait 2>/dev/null || true
 echo "== training finished (exit $status); stopping the suite"
 eqa_stop_all
 if [ $record = 1 ] && [ -d "$run_dir/bag" ]; then
