@@ -135,7 +135,8 @@ fn two_sim_policy_pairs_train_one_trainer_over_dds_without_losing_a_transition()
         .map(|i| {
             let (ns, seed) = (format!("/env{i}"), (i + 1).to_string());
             let a = ["sim", "--namespace", &ns, "--task", "block_pulling", "--seed", &seed, "--resolution", "19"];
-            Node::spawn(DOMAIN, &format!("sim {ns}"), &[&a[..], &["--episodes", "3", "--timeout-ms", "300"][..]].concat())
+            // 5 episodes of at most 50 steps: 200 steps and more even when a few end early
+            Node::spawn(DOMAIN, &format!("sim {ns}"), &[&a[..], &["--episodes", "5", "--timeout-ms", "300"][..]].concat())
         })
         .collect();
 
