@@ -136,6 +136,13 @@ eqa_on_exit() {
   local rc=$?
   trap - EXIT INT TERM
   eqa_stop_all
+  # a `tail --pid` follower (EQA_FOLLOW_PID) ends by itself once its process is gone; give it a
+  # moment to print the last lines, then stop it (a script's background commands ignore SIGINT)
+  if [ -n "${EQA_FOLLOW_PID:-}" ]; then
+    local _i
+    for _i in 1 2 3 4 5 6 7 8 9 10; do kill -0 "$EQA_FOLLOW_PID" 2>/dev/null || break; sleep 0.1; done
+    kill "$EQA_FOLLOW_PID" 2>/dev/null || true
+  fi
   [ -z "$EQA_EXIT_MESSAGE" ] || echo "$EQA_EXIT_MESSAGE"
   return $rc
 }

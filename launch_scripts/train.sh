@@ -103,14 +103,14 @@ for i in $(seq 0 $((num_envs - 1))); do
 done
 start sim_eval "$bin" sim --namespace /eval --eval --task "$task" --seed $((seed * 1000 + 999)) --resolution "$image"
 
-# The trainer's output (its progress line) follows on this terminal until it exits.
-tail -n +1 -f --pid="$(eqa_pid trainer)" "$run_dir/logs/trainer.log" >&2 &
-follow=$!
+# The trainer's output (its progress line, then its evaluation table) follows on stdout until it exits.
+tail -n +1 -f -s 0.2 --pid="$(eqa_pid trainer)" "$run_dir/logs/trainer.log" &
+EQA_FOLLOW_PID=$!
 while eqa_running trainer; do sleep 0.5; done
 set +e
 eqa_exit_status trainer
 status=$?
-wait "$follow" 2>/dev/null
+wait "$EQA_FOLLOW_PID" 2>/dev/null
 set -e
 echo "== training finished (exit $status); stopping the suite"
 eqa_stop_all
