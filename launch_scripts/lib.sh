@@ -54,11 +54,8 @@ eqa_group_alive() {
 
 # eqa_running NAME: true while the process started as NAME (or a member of its group) runs.
 eqa_running() {
-  local i
-  for i in "${!EQA_NAMES[@]}"; do
-    [ "${EQA_NAMES[$i]}" = "$1" ] && { eqa_group_alive "${EQA_PIDS[$i]}"; return; }
-  done
-  return 1
+  local pid
+  pid=$(eqa_pid "$1") && eqa_group_alive "$pid"
 }
 
 # eqa_stop NAME...: SIGINT to those groups, wait for them (<= EQA_STOP_TIMEOUT_S), then SIGKILL.
@@ -100,16 +97,12 @@ eqa_wait_for() {
   return 0
 }
 
-# eqa_exit_status NAME: exit status of a finished process started as NAME.
+# eqa_exit_status NAME: exit status of the process started as NAME (waits for it to finish; a
+# trapped signal interrupts the wait).
 eqa_exit_status() {
-  local i
-  for i in "${!EQA_NAMES[@]}"; do
-    if [ "${EQA_NAMES[$i]}" = "$1" ]; then
-      wait "${EQA_PIDS[$i]}"
-      return
-    fi
-  done
-  return 127
+  local pid
+  pid=$(eqa_pid "$1") || return 127
+  wait "$pid"
 }
 
 # eqa_pid NAME: the pid (= process group id) of the process started as NAME.

@@ -106,7 +106,6 @@ start sim_eval "$bin" sim --namespace /eval --eval --task "$task" --seed $((seed
 # The trainer's output (its progress line, then its evaluation table) follows on stdout until it exits.
 tail -n +1 -f -s 0.2 --pid="$(eqa_pid trainer)" "$run_dir/logs/trainer.log" &
 EQA_FOLLOW_PID=$!
-while eqa_running trainer; do sleep 0.5; done
 set +e
 eqa_exit_status trainer
 status=$?

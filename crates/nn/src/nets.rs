@@ -105,6 +105,22 @@ fn paper_layers(w: [usize; 7]) -> [(usize, usize, bool); 7] {
     [(w[0], 1, true), (w[1], 1, true), (w[2], 1, true), (w[3], 1, true), (w[4], 1, false), (w[5], 0, true), (w[6], 0, false)]
 }
 
+/// The pool-after flags of `(width, pad, pool after)` layers.
+fn pool_flags(layers: &[(usize, usize, bool)]) -> Vec<bool> {
+    layers.iter().map(|l| l.2).collect()
+}
+
+/// Plain 3×3 convs from `cin` channels through `layers`, named `{prefix}{i}`; with the last width.
+fn plain_convs(prefix: &str, cin: usize, layers: &[(usize, usize, bool)], init: &Init, device: &Device) -> (Vec<Conv>, usize) {
+    let mut cin = cin;
+    let mut convs = Vec::new();
+    for (i, &(w, pad, _)) in layers.iter().enumerate() {
+        convs.push(Conv::new(&format!("{prefix}{i}"), cin, w, 3, pad, init, device));
+        cin = w;
+    }
+    (convs, cin)
+}
+
 /// The 7-layer equivariant encoder `EquivariantEncoder128` (PAPER_SPEC §1.4 layers 1–7).
 ///
 /// Input field type: `in_channels × trivial`; output: `hidden × regular` at 1×1.
@@ -128,7 +144,7 @@ impl EquiEncoder {
             convs.push(EquivariantConv::new(&format!("{path}.convs.{i}"), &in_type, &out_type, 3, pad, init, device)?);
             in_type = out_type;
         }
-        Ok(EquiEncoder { convs, pools: layers.iter().map(|l| l.2).collect(), out_fields: n })
+        Ok(EquiEncoder { convs, pools: pool_flags(&layers), out_fields: n })
     }
 
     /// `[B, in_channels, S, S] → [B, 8·hidden (|G|·hidden), 1, 1]`.
@@ -325,13 +341,8 @@ pub struct CnnEncoder {
 impl CnnEncoder {
     fn new(path: &str, cfg: &NetConfig, widths: [usize; 7], init: &Init, device: &Device) -> Result<Self, NetError> {
         let layers = cfg.kept(paper_layers(widths))?;
-        let mut cin = cfg.in_channels;
-        let mut convs = Vec::new();
-        for (i, &(w, pad, _)) in layers.iter().enumerate() {
-            convs.push(Conv::new(&format!("{path}.convs.{i}"), cin, w, 3, pad, init, device));
-            cin = w;
-        }
-        Ok(CnnEncoder { convs, pools: layers.iter().map(|l| l.2).collect() })
+        let (convs, _) = plain_convs(&format!("{path}.convs."), cfg.in_channels, &layers, init, device);
+        Ok(CnnEncoder { convs, pools: pool_flags(&layers) })
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
@@ -445,14 +456,9 @@ impl SenEncoder {
         let n = cfg.hidden;
         let w = [n / 2, n, 2 * n, 4 * n, 2 * n];
         let layers = cfg.kept([(w[0], 1, true), (w[1], 1, true), (w[2], 1, true), (w[3], 1, true), (w[4], 1, false)])?;
-        let mut cin = cfg.in_channels;
-        let mut convs = Vec::new();
-        for (i, &(w, pad, _)) in layers.iter().enumerate() {
-            convs.push(Conv::new(&format!("{path}.convs.{i}"), cin, w, 3, pad, init, device));
-            cin = w;
-        }
+        let (convs, _) = plain_convs(&format!("{path}.convs."), cfg.in_channels, &layers, init, device);
         let fc = Linear::new(&format!("{path}.fc"), 2 * n * 64, 8 * n, init, device);
-        Ok(SenEncoder { convs, fc, pools: layers.iter().map(|l| l.2).collect() })
+        Ok(SenEncoder { convs, fc, pools: pool_flags(&layers) })
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
@@ -568,13 +574,8 @@ impl RotCnnNet {
     pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
         let n = cfg.hidden;
         let layers = cfg.kept(paper_layers([n / 4, n / 2, n, 2 * n, 4 * n, 4 * n, 2 * n]))?;
-        let mut cin = cfg.in_channels;
-        let mut convs = Vec::new();
-        for (i, &(w, pad, _)) in layers.iter().enumerate() {
-            convs.push(Conv::new(&format!("convs.{i}"), cin, w, 3, pad, init, device));
-            cin = w;
-        }
-        Ok(RotCnnNet { convs, head: Conv::new("head", cin, 8, 1, 0, init, device), pools: layers.iter().map(|l| l.2).collect() })
+        let (convs, cin) = plain_convs("convs.", cfg.in_channels, &layers, init, device);
+        Ok(RotCnnNet { convs, head: Conv::new("head", cin, 8, 1, 0, init, device), pools: pool_flags(&layers) })
     }
 
     /// `[B, in_channels, S, S] → logits [B, 8]`.
