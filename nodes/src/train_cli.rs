@@ -57,6 +57,9 @@ pub struct TrainArgs {
     /// Hidden size of the networks.
     #[arg(long)]
     pub hidden: Option<usize>,
+    /// Adam learning rate of the critic, actor and α (the paper's: 1e-3).
+    #[arg(long)]
+    pub lr: Option<f64>,
     /// Rendered frame size and network input size, as FRAME:INPUT (e.g. 76:64, 152:128).
     #[arg(long)]
     pub image: Option<String>,
@@ -128,7 +131,7 @@ impl TrainArgs {
         }
         set!(seed => seed, total_updates => total_updates, num_envs => num_envs, eval_every => eval_every,
              eval_episodes => eval_episodes, demo_episodes => demo_episodes, batch_size => batch_size,
-             hidden => agent.hidden, checkpoint_every => checkpoint_every, training_starts => training_starts);
+             hidden => agent.hidden, lr => agent.lr, checkpoint_every => checkpoint_every, training_starts => training_starts);
         if let Some(img) = &self.image {
             let (f, i) = img.split_once(':').ok_or_else(|| anyhow::anyhow!("--image `{img}`: expected FRAME:INPUT, e.g. 76:64"))?;
             cfg.image_size = f.parse().with_context(|| format!("--image `{img}`: frame size"))?;
@@ -208,4 +211,44 @@ pub fn stop_flag() -> Arc<AtomicBool> {
     });
     let _ = rx.recv_timeout(std::time::Duration::from_secs(1));
     stop
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser as _;
+
+    use super::*;
+
+    #[derive(clap::Parser)]
+    struct Cli {
+        #[command(flatten)]
+        train: TrainArgs,
+    }
+
+    fn config(args: &[&str]) -> anyhow::Result<TrainConfig> {
+        let cli = Cli::try_parse_from(std::iter::once("train").chain(args.iter().copied()))?;
+        cli.train.build_config()
+    }
+
+    #[test]
+    fn flags_override_the_preset() {
+        let base = config(&[]).unwrap();
+        assert_eq!(base, TrainConfig::reduced("block_pulling"));
+        let cfg = config(&["--task", "drawer_opening", "--lr", "0.003", "--hidden", "16", "--image", "76:64"]).unwrap();
+        assert_eq!(cfg.task, "drawer_opening");
+        assert_eq!(cfg.agent.lr, 0.003);
+        assert_eq!(cfg.agent.hidden, 16);
+        assert_eq!((cfg.image_size, cfg.agent.input_size), (76, 64));
+        assert_eq!(cfg.batch_size, base.batch_size);
+    }
+
+    #[test]
+    fn bad_flags_name_the_option() {
+        let e = config(&["--lr", "0"]).unwrap_err().to_string();
+        assert!(e.contains("agent.lr"), "{e}");
+        let e = config(&["--image", "76"]).unwrap_err().to_string();
+        assert!(e.contains("--image"), "{e}");
+        let e = config(&["--preset", "huge"]).unwrap_err().to_string();
+        assert!(e.contains("huge"), "{e}");
+    }
 }
