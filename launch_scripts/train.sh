@@ -55,7 +55,7 @@ done
 run_dir=${run_dir:-runs/$task-$(date +%Y%m%d-%H%M%S)}
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0}
 export ROS_LOCALHOST_ONLY=${ROS_LOCALHOST_ONLY:-1}
-export RUST_LOG=${RUST_LOG:-warn,equiarm=info,equiarm_nodes=info}
+# Logging: the nodes' own default filter (info, RustDDS's per-sample warnings off) unless RUST_LOG is set.
 export EQA_STOP_TIMEOUT_S=${EQA_STOP_TIMEOUT_S:-30}
 
 source launch_scripts/lib.sh

@@ -332,9 +332,12 @@ pub async fn shutdown_signal() -> anyhow::Result<&'static str> {
 }
 
 /// The default log filter: our crates at info, RustDDS's per-datagram warnings and error floods off
-/// (DDS_NOTES §3.6). `RUST_LOG` overrides it.
-pub const DEFAULT_LOG_FILTER: &str =
-    "info,rustdds=warn,rustdds::network::udp_sender=error,rustdds::structure::sequence_number=off,ros2_client=warn";
+/// (DDS_NOTES §3.6). The writer's "send_message_to_readers: No locators" warning is off too: on a host
+/// whose loopback has no multicast (Linux's default) RustDDS repeats it for every sample sent to a
+/// same-host reader, which it still reaches through its loopback fallback (train.sh's trainer logged
+/// ~1,400 of them in its first 90 s). `RUST_LOG` overrides it.
+pub const DEFAULT_LOG_FILTER: &str = "info,rustdds=warn,rustdds::network::udp_sender=error,\
+rustdds::rtps::writer=error,rustdds::structure::sequence_number=off,ros2_client=warn";
 
 /// Initialises logging to stderr once per process (later calls do nothing).
 pub fn init_logging() {
