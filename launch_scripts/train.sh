@@ -8,10 +8,10 @@
 #   - N sim+policy pairs  /env0 … /envN-1 (the policy answers the first --demo-episodes episodes of
 #                         each env with the expert, then samples from the learned actor)
 #   - one eval pair       /eval (greedy policy; its episodes are the trainer's evaluations)
-# (in that order: the pairs' policies before their sims, see below), follows the trainer's output
-# until it finishes, stops every process cleanly (also on Ctrl-C: SIGINT, the trainer then saves a
-# checkpoint; SIGKILL after EQA_STOP_TIMEOUT_S, default 30 s), and prints the evaluation table and where the bag, checkpoints, metrics and
-# learning curve are.
+# (in that order, all policies before all sims: see "Start order" below), follows the trainer's
+# output until it finishes, stops every process cleanly (also on Ctrl-C: SIGINT, the trainer then
+# saves a checkpoint; SIGKILL after EQA_STOP_TIMEOUT_S, default 30 s), and prints the evaluation
+# table and where the bag, checkpoints, metrics and learning curve are.
 #
 # Options (defaults: the reduced CPU config of block pulling, 5 envs, seed 0):
 #   --task T            block_pulling | block_pushing | block_picking | drawer_opening | block_in_bowl

@@ -28,7 +28,8 @@ fn train_sh(domain: u32, run_dir: &Path, updates: u32) -> Command {
         .args(["--eval-every", "10", "--eval-episodes", "2", "--weights-every", "5", "--training-starts", "20"])
         .env("EQUIARM_BIN", bin())
         .env("ROS_DOMAIN_ID", domain.to_string())
-        .env("RUST_LOG", "info");
+        // the nodes' default log filter, as a user gets it
+        .env_remove("RUST_LOG");
     c
 }
 
