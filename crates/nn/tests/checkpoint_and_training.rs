@@ -17,7 +17,7 @@ fn cfg() -> NetConfig {
 }
 
 fn tmpfile(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("equiarm_nn_test_{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("checkpoint_and_training");
     std::fs::create_dir_all(&dir).unwrap();
     dir.join(name)
 }

@@ -852,7 +852,7 @@ mod tests {
 
     #[test]
     fn save_load_continues_bit_identically() {
-        let dir = std::env::temp_dir().join(format!("equiarm-sac-agent-{}", std::process::id()));
+        let dir = crate::scratch::Scratch::new("agent");
         std::fs::create_dir_all(&dir).unwrap();
         let batches: Vec<Batch> = (0..6).map(|i| batch(6, 8, 10 + i)).collect();
         let mut straight = Agent::new(tiny(ModelKind::Equi), 5).unwrap();

@@ -27,3 +27,41 @@ pub mod rng;
 pub mod schedule;
 pub mod tensorfile;
 pub mod train;
+
+/// Scratch directories for this crate's unit tests, removed when the test ends.
+#[cfg(test)]
+pub(crate) mod scratch {
+    use std::path::{Path, PathBuf};
+
+    /// An empty directory under the system temp dir (per process and name); removed on drop,
+    /// so passing tests leave nothing behind (a failing one's panic still drops it).
+    pub(crate) struct Scratch(PathBuf);
+
+    impl Scratch {
+        /// `equiarm_sac_<name>_<pid>`, emptied. Not created: some tests want it missing.
+        pub(crate) fn new(name: &str) -> Self {
+            let dir = std::env::temp_dir().join(format!("equiarm_sac_{name}_{}", std::process::id()));
+            let _ = std::fs::remove_dir_all(&dir);
+            Scratch(dir)
+        }
+    }
+
+    impl std::ops::Deref for Scratch {
+        type Target = Path;
+        fn deref(&self) -> &Path {
+            &self.0
+        }
+    }
+
+    impl AsRef<Path> for Scratch {
+        fn as_ref(&self) -> &Path {
+            &self.0
+        }
+    }
+
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+}

@@ -371,12 +371,10 @@ pub fn read_series(dir: &Path, name: &str) -> Result<Vec<(u64, f64)>, MetricsErr
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scratch::Scratch;
 
-    fn scratch(name: &str) -> PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("equiarm_sac_metrics_{}_{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        dir
+    fn scratch(name: &str) -> Scratch {
+        Scratch::new(&format!("metrics_{name}"))
     }
 
     #[test]

@@ -942,10 +942,10 @@ pub fn write_png(path: &Path, chart: &Chart, series: &[Series]) -> Result<(), Pl
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scratch::Scratch;
 
-    fn scratch(name: &str) -> PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("equiarm_sac_plot_{}_{name}", std::process::id()));
+    fn scratch(name: &str) -> Scratch {
+        let dir = Scratch::new(&format!("plot_{name}"));
         std::fs::create_dir_all(&dir).unwrap();
         dir
     }
@@ -1026,7 +1026,8 @@ mod tests {
 
     #[test]
     fn png_decodes_at_the_requested_size() {
-        let path = scratch("size").join("curve.png");
+        let dir = scratch("size");
+        let path = dir.join("curve.png");
         let chart = Chart {
             width: 640,
             height: 400,
@@ -1088,7 +1089,8 @@ mod tests {
 
     #[test]
     fn bad_input_is_an_error_naming_it() {
-        let path = scratch("missing").join("no_such_dir").join("c.png");
+        let dir = scratch("missing");
+        let path = dir.join("no_such_dir").join("c.png");
         let err = write_png(&path, &Chart::default(), &[]).unwrap_err();
         assert!(matches!(err, PlotError::MissingDirectory { .. }));
         assert!(err.to_string().contains("no_such_dir"), "{err}");

@@ -28,7 +28,7 @@ fn tiny() -> TrainConfig {
 }
 
 fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("equiarm-resume-{}-{name}", std::process::id()));
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("resume-{name}"));
     let _ = std::fs::remove_dir_all(&d);
     d
 }
