@@ -8,9 +8,10 @@
 //! substeps to close or open), as BulletArm moves the arm before it drives the gripper. Holding (§3.2 item 4): an object counts as held when both fingers touch it with
 //! contact normals that are mostly horizontal (|n_z| < 0.3).
 //!
-//! Limitations: the palm is kinematic, so it pushes dynamic objects with unlimited force and passes
-//! through the fixed table (the TCP height clamp keeps it above). The fingers open along the palm's
-//! local x axis.
+//! Limitations: the palm is kinematic, so it pushes dynamic objects sideways with unlimited force and
+//! passes through the fixed table (the TCP height clamp keeps it above). Moving down, it stops on the
+//! top face of a movable object it does not hold, as BulletArm's force-limited arm stalls there
+//! (see `descent_room`). The fingers open along the palm's local x axis.
 
 use rapier3d::prelude::*;
 use rapier3d_urdf::UrdfRobotHandles;
@@ -230,13 +231,20 @@ impl Gripper {
         let yaw0 = self.yaw;
         let yaw1 = self.yaw + a.dtheta;
         let n = scene.params.substeps;
+        let held = self.held_bodies(scene);
+        let mut z = start.z;
         for k in 1..=n {
             let s = k as f32 / n as f32;
-            let p = start + (target - start) * s;
+            let mut p = start + (target - start) * s;
+            if p.z < z {
+                p.z = z - self.descent_room(scene, z - p.z, &held);
+            }
+            z = p.z;
             let y = yaw0 + (yaw1 - yaw0) * s;
             scene.physics.bodies[self.palm].set_next_kinematic_position(palm_pose(p, y));
             scene.step();
         }
+        let target = Vector::new(target.x, target.y, z);
         self.tcp = target;
         self.yaw = yaw1;
         // As BulletArm's step: move first, then drive the fingers (with extra substeps only when the
@@ -252,6 +260,53 @@ impl Gripper {
             scene.physics.bodies[self.palm].set_next_kinematic_position(palm_pose(target, yaw1));
             scene.step();
         }
+    }
+
+    /// How far (≤ `depth`, m) the gripper can move straight down from where it is before one of
+    /// its colliders lands on top of a movable object that it does not hold.
+    ///
+    /// The palm is kinematic (unlimited force): without this it would press a block it lands on
+    /// into the table until the solver ejects the block sideways, out of the workspace, at
+    /// 1–2 m/s. BulletArm's arm is position-controlled with limited force (PAPER_SPEC §3.2): its
+    /// IK stalls on top of the object instead. Side contacts (a finger against a block it sweeps)
+    /// do not stop the descent; only surfaces facing up (outward normal z > 0.7) do.
+    fn descent_room(&self, scene: &Scene, depth: f32, held: &[RigidBodyHandle]) -> f32 {
+        /// Gap kept above the surface, m.
+        const SKIN: f32 = 5e-4;
+        let bodies = &scene.physics.bodies;
+        let colliders = &scene.physics.colliders;
+        let own = |b: RigidBodyHandle| b == self.palm || self.fingers.contains(&b);
+        let down = Vector::new(0.0, 0.0, -1.0);
+        let opts = rapier3d::parry::query::ShapeCastOptions {
+            max_time_of_impact: depth + SKIN,
+            target_distance: 0.0,
+            stop_at_penetration: false,
+            compute_impact_geometry_on_penetration: true,
+        };
+        let mut room = depth;
+        for (_, gc) in colliders.iter().filter(|(_, c)| c.parent().is_some_and(own)) {
+            for (_, oc) in colliders.iter() {
+                let Some(ob) = oc.parent() else { continue };
+                if own(ob) || held.contains(&ob) || !bodies[ob].is_dynamic() || oc.is_sensor() {
+                    continue;
+                }
+                let hit = rapier3d::parry::query::cast_shapes(
+                    oc.position(),
+                    Vector::ZERO,
+                    oc.shape(),
+                    gc.position(),
+                    down,
+                    gc.shape(),
+                    opts,
+                );
+                if let Ok(Some(hit)) = hit
+                    && (oc.position().rotation * hit.normal1).z > 0.7
+                {
+                    room = room.min((hit.time_of_impact - SKIN).max(0.0));
+                }
+            }
+        }
+        room
     }
 
     /// Measured open ratio from the finger positions (mean of both fingers).

@@ -305,3 +305,51 @@ fn config_round_trips_through_json_and_rejects_unknown_keys() {
             .unwrap_err();
     assert!(err.to_string().contains("substep"), "{err}");
 }
+
+/// Dynamic bodies heavier than the fingers (the task's objects), as (x, y, z).
+fn objects(env: &Env) -> Vec<[f32; 3]> {
+    let scene = env.scene().unwrap();
+    scene
+        .physics
+        .bodies
+        .iter()
+        .filter(|(_, b)| b.is_dynamic() && b.mass() > 0.3)
+        .map(|(_, b)| {
+            let t = b.translation();
+            [t.x, t.y, t.z]
+        })
+        .collect()
+}
+
+#[test]
+fn descending_onto_a_block_stops_on_top_and_leaves_it_in_place() {
+    // The palm is kinematic: pressed down onto a flat block (5 cm tall) it used to push the
+    // block into the table until the solver shot it sideways, often out of the workspace.
+    let mut cfg = EnvConfig::new(TaskKind::BlockPulling);
+    cfg.render = false;
+    let mut env = Env::new(cfg).unwrap();
+    for seed in 0..3 {
+        let mut o = env.reset(seed).unwrap();
+        let block = objects(&env)[0];
+        // Above the block centre, jaw half open (its 3.75 cm gap is narrower than the block).
+        for _ in 0..8 {
+            let a = Action::new(0.5, block[0] - o.tcp[0], block[1] - o.tcp[1], 0.0, 0.0);
+            o = env.step(&a).unwrap().observation;
+        }
+        let mut r = None;
+        for _ in 0..6 {
+            let s = env.step(&Action::new(0.5, 0.0, 0.0, -0.05, 0.0)).unwrap();
+            assert!(!s.info.invalid, "seed {seed}: the block left the workspace");
+            r = Some(s);
+        }
+        let o = r.unwrap().observation;
+        let after = objects(&env)[0];
+        let moved = ((after[0] - block[0]).powi(2) + (after[1] - block[1]).powi(2)).sqrt();
+        assert!(moved < 0.01, "seed {seed}: block moved {moved} m: {block:?} -> {after:?}");
+        assert!((after[2] - block[2]).abs() < 0.003, "seed {seed}: block height {} -> {}", block[2], after[2]);
+        // The finger bottoms (1 cm below the TCP) rest on the block's top face (z = 0.05), not
+        // at the floor clamp (TCP z 0.01).
+        let bottoms = o.tcp[2] - 0.01;
+        assert!((0.047..0.055).contains(&bottoms), "seed {seed}: finger bottoms at z {bottoms}");
+    }
+}
