@@ -1,5 +1,6 @@
 //! Diagnostic: greedy rollouts of a checkpoint, printing per step the gripper position, the
-//! greedy action and the expert's action for the same observation.
+//! greedy action and the expert's action for the same observation; each episode's end (success,
+//! invalid or timeout) and, last, the counts.
 //!
 //! `cargo run -p equiarm_sac --example rollout -- RUN_DIR [EPISODES]`
 use equiarm_sac::agent::ActMode;
@@ -24,7 +25,7 @@ fn run(dir: &std::path::Path, episodes: u64) -> Result<(), Box<dyn std::error::E
     let mut l = Learner::new(cfg.clone())?;
     l.resume(&equiarm_sac::train::find_checkpoint(dir)?)?;
     let mut env = equiarm_sim::Env::new(equiarm_sac::train::env_config(&cfg))?;
-    let mut wins = 0;
+    let (mut wins, mut invalid) = (0, 0);
     for ep in 0..episodes {
         let mut o = env.reset(equiarm_sac::train::episode_seed(cfg.seed ^ equiarm_sac::train::EVAL, 0, ep))?;
         println!("episode {ep}");
@@ -36,13 +37,14 @@ fn run(dir: &std::path::Path, episodes: u64) -> Result<(), Box<dyn std::error::E
                 o.tcp[0], o.tcp[1], o.tcp[2], g[0], g[1], g[2], g[3], g[4], e[0], e[1], e[2], e[3], e[4]);
             let r = env.step(&Action::from_normalized(g))?;
             if r.done {
-                println!("  done success {}", r.info.success);
+                println!("  done success {} invalid {} timeout {}", r.info.success, r.info.invalid, r.info.timeout);
                 wins += r.info.success as u32;
+                invalid += r.info.invalid as u32;
                 break;
             }
             o = r.observation;
         }
     }
-    println!("{wins}/{episodes}");
+    println!("{wins}/{episodes} successes, {invalid} ended early (invalid: an object left the workspace)");
     Ok(())
 }
