@@ -231,7 +231,8 @@ impl Gripper {
         let yaw0 = self.yaw;
         let yaw1 = self.yaw + a.dtheta;
         let n = scene.params.substeps;
-        let held = self.held_bodies(scene);
+        // Only a descent needs the held objects (they do not stop it).
+        let held = if target.z < start.z { self.held_bodies(scene) } else { Vec::new() };
         let mut z = start.z;
         for k in 1..=n {
             let s = k as f32 / n as f32;
