@@ -6,7 +6,8 @@
 //!
 //! `cargo run -p equiarm_sac --example bc_check -- [WEIGHT] [UPDATES] [FRAME:INPUT] [HIDDEN] [MODEL]`
 //!
-//! Environment: `DEMOS=K` demo episodes (default the config's), `EVAL_EVERY=U` also runs the greedy
+//! Environment: `DEMOS=K` demo episodes (default the config's), `VIEW=angle90` another camera
+//! preset (default the paper's oblique `side`), `EVAL_EVERY=U` also runs the greedy
 //! policy on the config's evaluation episodes in the simulator every U updates (the success rate
 //! a policy fitted to the demos alone reaches).
 use equiarm_sac::config::TrainConfig;
@@ -30,6 +31,9 @@ fn main() {
     cfg.agent.expert_weight = w;
     if let Some(k) = std::env::var("DEMOS").ok().and_then(|v| v.parse().ok()) {
         cfg.demo_episodes = k;
+    }
+    if let Ok(v) = std::env::var("VIEW") {
+        cfg.view = v;
     }
     let eval_every: u64 = std::env::var("EVAL_EVERY").ok().and_then(|v| v.parse().ok()).unwrap_or(0);
     let mut l = Learner::new(cfg.clone()).unwrap();

@@ -1,0 +1,92 @@
+//! The Equi networks act on images by D4 (rotations by quarter turns, mirror about the image's
+//! vertical axis) and on the action's (dx, dy) by the representation `irrep(1,1)`, whose mirror is
+//! `diag(1, −1)`. That pairing is right only for one family of camera orientations: a world
+//! symmetry `W` must show in the image as a grid element `g` with `ρ(g) = W`. If the camera were
+//! turned or mirrored the other way, the four mirrors of D4 would pair an image with the wrong
+//! action (an "incorrect" symmetry in the paper's terms) while every per-network equivariance test
+//! still passed. These tests pin the simulator's cameras to the orientation the networks assume.
+use equiarm_nn::group::Group;
+use equiarm_nn::repr::Representation;
+use equiarm_sim::{Camera, ViewPreset};
+use nalgebra::Point3;
+
+type M2 = [[f64; 2]; 2];
+
+fn mul(a: M2, b: M2) -> M2 {
+    let mut c = [[0.0; 2]; 2];
+    for i in 0..2 {
+        for j in 0..2 {
+            c[i][j] = a[i][0] * b[0][j] + a[i][1] * b[1][j];
+        }
+    }
+    c
+}
+
+fn inv(a: M2) -> M2 {
+    let d = a[0][0] * a[1][1] - a[0][1] * a[1][0];
+    [[a[1][1] / d, -a[0][1] / d], [-a[1][0] / d, a[0][0] / d]]
+}
+
+/// The image-plane displacement (x = column, y = −row, as the networks' grid action uses) of a
+/// 1 cm move of a point on the table at the workspace centre along world +x and +y: the columns
+/// of the world → image map, linearised there.
+fn plane_map(view: ViewPreset) -> M2 {
+    let cam = Camera::new(view.config()).expect("camera");
+    let at = |x: f64, y: f64| {
+        let (u, v, _) = cam.project(Point3::new(x, y, 0.0)).expect("table point in front of the camera");
+        (u, -v)
+    };
+    let o = at(0.45, 0.0);
+    let ex = at(0.46, 0.0);
+    let ey = at(0.45, 0.01);
+    [[ex.0 - o.0, ey.0 - o.0], [ex.1 - o.1, ey.1 - o.1]]
+}
+
+fn normalised_columns(m: M2) -> M2 {
+    let n0 = m[0][0].hypot(m[1][0]);
+    let n1 = m[0][1].hypot(m[1][1]);
+    [[m[0][0] / n0, m[0][1] / n1], [m[1][0] / n0, m[1][1] / n1]]
+}
+
+#[test]
+fn top_down_camera_pairs_every_d4_image_element_with_its_action_representation() {
+    let d4 = Group::dihedral(4);
+    let rho = Representation::irrep(d4, 1, 1);
+    let flips = Representation::quotient_by_rotations(d4);
+    let m = plane_map(ViewPreset::Angle90);
+    for g in d4.elements() {
+        // The world map that shows as the grid element g: W = M⁻¹ P(g) M.
+        let w = mul(inv(m), mul(d4.plane_matrix(g), m));
+        let r = rho.matrix(g);
+        for i in 0..2 {
+            for j in 0..2 {
+                assert!(
+                    (w[i][j] - r[2 * i + j]).abs() < 1e-6,
+                    "{g:?}: the image element moves the world by {w:?}, but the networks map (dx, dy) by {r:?}"
+                );
+            }
+        }
+        // A world mirror flips the yaw: (dθ, −dθ) swap exactly for the mirrors.
+        let det = w[0][0] * w[1][1] - w[0][1] * w[1][0];
+        let swaps = flips.matrix(g)[0] == 0.0;
+        assert_eq!(det < 0.0, swaps, "{g:?}: world determinant {det} against the dθ representation");
+    }
+}
+
+#[test]
+fn oblique_camera_only_foreshortens_the_top_down_axes() {
+    // The paper's oblique view breaks D4 by foreshortening world x (and by parallax), not by
+    // turning or mirroring the image: its axes point where the top-down camera's do.
+    let top = normalised_columns(plane_map(ViewPreset::Angle90));
+    for view in [ViewPreset::Side, ViewPreset::Angle30, ViewPreset::Angle60] {
+        let m = plane_map(view);
+        let n = normalised_columns(m);
+        for i in 0..2 {
+            for j in 0..2 {
+                assert!((n[i][j] - top[i][j]).abs() < 1e-6, "{}: axes {n:?}, top-down {top:?}", view.name());
+            }
+        }
+        let (sx, sy) = (m[0][0].hypot(m[1][0]), m[0][1].hypot(m[1][1]));
+        assert!(sx < sy, "{}: world x ({sx} px/cm) is the foreshortened axis, not y ({sy})", view.name());
+    }
+}
