@@ -90,3 +90,44 @@ fn oblique_camera_only_foreshortens_the_top_down_axes() {
         assert!(sx < sy, "{}: world x ({sx} px/cm) is the foreshortened axis, not y ({sy})", view.name());
     }
 }
+
+#[test]
+fn rendered_frames_put_blocks_where_the_camera_projects_them() {
+    // The maps above come from `Camera::project`, (column, row); the networks see the rendered
+    // frame. A block's segmentation centroid must sit where its top face's centre projects.
+    let mut cfg = equiarm_sim::EnvConfig::new(equiarm_sim::TaskKind::BlockPulling);
+    cfg.camera = ViewPreset::Angle90.config();
+    let mut env = equiarm_sim::Env::new(cfg).expect("env");
+    // How far the centroid is from where a transposed or mirrored frame would put it, per seed:
+    // the blocks must sit off the image's diagonals and centre lines for the check to mean much.
+    let mut alternatives = [0.0f64; 3];
+    for seed in 0..4 {
+        let obs = env.reset(seed).expect("reset");
+        let scene = env.scene().expect("scene after reset");
+        let names = env.segmentation_names().to_vec();
+        let seg = names.iter().position(|n| n == "block1" || n.starts_with("block1/")).expect("block1 in the segmentation") as u16;
+        let visual = scene.visuals.iter().find(|v| v.seg == seg).expect("block1 visual");
+        let t = scene.physics.colliders[visual.collider].translation();
+        let (u, v, _) = env.camera().project(Point3::new(t.x as f64, t.y as f64, 0.05)).expect("block in view");
+        let (mut n, mut sr, mut sc) = (0.0, 0.0, 0.0);
+        for (i, &s) in obs.segmentation.iter().enumerate() {
+            if s == seg {
+                n += 1.0;
+                sr += (i / obs.width) as f64;
+                sc += (i % obs.width) as f64;
+            }
+        }
+        assert!(n > 100.0, "seed {seed}: block1 covers {n} pixels");
+        let (r, c) = (sr / n, sc / n);
+        // Tolerance: the gripper, above the workspace centre, hides part of some blocks.
+        let last = (obs.width - 1) as f64;
+        for (k, (ar, ac)) in [(u, v), (v, last - u), (last - v, u)].into_iter().enumerate() {
+            alternatives[k] = alternatives[k].max((r - ar).hypot(c - ac));
+        }
+        assert!(
+            (r - v).abs() < 3.0 && (c - u).abs() < 3.0,
+            "seed {seed}: block1's pixels centre on (row {r:.1}, col {c:.1}), its top projects to (row {v:.1}, col {u:.1})"
+        );
+    }
+    assert!(alternatives.iter().all(|&d| d > 10.0), "scenes too symmetric to tell the layouts apart: {alternatives:?}");
+}
