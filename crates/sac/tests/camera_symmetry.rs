@@ -7,45 +7,24 @@
 //! still passed. These tests pin the simulator's cameras to the orientation the networks assume.
 use equiarm_nn::group::Group;
 use equiarm_nn::repr::Representation;
+use equiarm_sim::gripper::WORKSPACE;
 use equiarm_sim::{Camera, ViewPreset};
-use nalgebra::Point3;
-
-type M2 = [[f64; 2]; 2];
-
-fn mul(a: M2, b: M2) -> M2 {
-    let mut c = [[0.0; 2]; 2];
-    for i in 0..2 {
-        for j in 0..2 {
-            c[i][j] = a[i][0] * b[0][j] + a[i][1] * b[1][j];
-        }
-    }
-    c
-}
-
-fn inv(a: M2) -> M2 {
-    let d = a[0][0] * a[1][1] - a[0][1] * a[1][0];
-    [[a[1][1] / d, -a[0][1] / d], [-a[1][0] / d, a[0][0] / d]]
-}
+use nalgebra::{Matrix2, Point3};
 
 /// The image-plane displacement (x = column, y = −row, as the networks' grid action uses) of a
 /// 1 cm move of a point on the table at the workspace centre along world +x and +y: the columns
 /// of the world → image map, linearised there.
-fn plane_map(view: ViewPreset) -> M2 {
+fn plane_map(view: ViewPreset) -> Matrix2<f64> {
     let cam = Camera::new(view.config()).expect("camera");
     let at = |x: f64, y: f64| {
         let (u, v, _) = cam.project(Point3::new(x, y, 0.0)).expect("table point in front of the camera");
         (u, -v)
     };
-    let o = at(0.45, 0.0);
-    let ex = at(0.46, 0.0);
-    let ey = at(0.45, 0.01);
-    [[ex.0 - o.0, ey.0 - o.0], [ex.1 - o.1, ey.1 - o.1]]
-}
-
-fn normalised_columns(m: M2) -> M2 {
-    let n0 = m[0][0].hypot(m[1][0]);
-    let n1 = m[0][1].hypot(m[1][1]);
-    [[m[0][0] / n0, m[0][1] / n1], [m[1][0] / n0, m[1][1] / n1]]
+    let (cx, cy) = ((WORKSPACE[0][0] + WORKSPACE[0][1]) as f64 / 2.0, (WORKSPACE[1][0] + WORKSPACE[1][1]) as f64 / 2.0);
+    let o = at(cx, cy);
+    let ex = at(cx + 0.01, cy);
+    let ey = at(cx, cy + 0.01);
+    Matrix2::new(ex.0 - o.0, ey.0 - o.0, ex.1 - o.1, ey.1 - o.1)
 }
 
 #[test]
@@ -56,18 +35,15 @@ fn top_down_camera_pairs_every_d4_image_element_with_its_action_representation()
     let m = plane_map(ViewPreset::Angle90);
     for g in d4.elements() {
         // The world map that shows as the grid element g: W = M⁻¹ P(g) M.
-        let w = mul(inv(m), mul(d4.plane_matrix(g), m));
-        let r = rho.matrix(g);
-        for i in 0..2 {
-            for j in 0..2 {
-                assert!(
-                    (w[i][j] - r[2 * i + j]).abs() < 1e-6,
-                    "{g:?}: the image element moves the world by {w:?}, but the networks map (dx, dy) by {r:?}"
-                );
-            }
-        }
+        let p = d4.plane_matrix(g);
+        let w = m.try_inverse().expect("invertible camera map") * Matrix2::new(p[0][0], p[0][1], p[1][0], p[1][1]) * m;
+        let r = Matrix2::from_row_slice(rho.matrix(g));
+        assert!(
+            (w - r).abs().max() < 1e-6,
+            "{g:?}: the image element moves the world by {w:?}, but the networks map (dx, dy) by {r:?}"
+        );
         // A world mirror flips the yaw: (dθ, −dθ) swap exactly for the mirrors.
-        let det = w[0][0] * w[1][1] - w[0][1] * w[1][0];
+        let det = w.determinant();
         let swaps = flips.matrix(g)[0] == 0.0;
         assert_eq!(det < 0.0, swaps, "{g:?}: world determinant {det} against the dθ representation");
     }
@@ -77,16 +53,13 @@ fn top_down_camera_pairs_every_d4_image_element_with_its_action_representation()
 fn oblique_camera_only_foreshortens_the_top_down_axes() {
     // The paper's oblique view breaks D4 by foreshortening world x (and by parallax), not by
     // turning or mirroring the image: its axes point where the top-down camera's do.
-    let top = normalised_columns(plane_map(ViewPreset::Angle90));
+    let axes = |m: Matrix2<f64>| Matrix2::from_columns(&[m.column(0).normalize(), m.column(1).normalize()]);
+    let top = axes(plane_map(ViewPreset::Angle90));
     for view in [ViewPreset::Side, ViewPreset::Angle30, ViewPreset::Angle60] {
         let m = plane_map(view);
-        let n = normalised_columns(m);
-        for i in 0..2 {
-            for j in 0..2 {
-                assert!((n[i][j] - top[i][j]).abs() < 1e-6, "{}: axes {n:?}, top-down {top:?}", view.name());
-            }
-        }
-        let (sx, sy) = (m[0][0].hypot(m[1][0]), m[0][1].hypot(m[1][1]));
+        let n = axes(m);
+        assert!((n - top).abs().max() < 1e-6, "{}: axes {n:?}, top-down {top:?}", view.name());
+        let (sx, sy) = (m.column(0).norm(), m.column(1).norm());
         assert!(sx < sy, "{}: world x ({sx} px/cm) is the foreshortened axis, not y ({sy})", view.name());
     }
 }
@@ -104,11 +77,11 @@ fn rendered_frames_put_blocks_where_the_camera_projects_them() {
     for seed in 0..4 {
         let obs = env.reset(seed).expect("reset");
         let scene = env.scene().expect("scene after reset");
-        let names = env.segmentation_names().to_vec();
-        let seg = names.iter().position(|n| n == "block1" || n.starts_with("block1/")).expect("block1 in the segmentation") as u16;
+        let seg = env.segmentation_names().iter().position(|n| n == "block1" || n.starts_with("block1/")).expect("block1 in the segmentation") as u16;
         let visual = scene.visuals.iter().find(|v| v.seg == seg).expect("block1 visual");
         let t = scene.physics.colliders[visual.collider].translation();
-        let (u, v, _) = env.camera().project(Point3::new(t.x as f64, t.y as f64, 0.05)).expect("block in view");
+        // The block rests on the table, so its top face is at twice its centre's height.
+        let (u, v, _) = env.camera().project(Point3::new(t.x as f64, t.y as f64, 2.0 * t.z as f64)).expect("block in view");
         let (mut n, mut sr, mut sc) = (0.0, 0.0, 0.0);
         for (i, &s) in obs.segmentation.iter().enumerate() {
             if s == seg {
