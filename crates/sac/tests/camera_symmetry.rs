@@ -33,10 +33,11 @@ fn top_down_camera_pairs_every_d4_image_element_with_its_action_representation()
     let rho = Representation::irrep(d4, 1, 1);
     let flips = Representation::quotient_by_rotations(d4);
     let m = plane_map(ViewPreset::Angle90);
+    let m_inv = m.try_inverse().expect("invertible camera map");
     for g in d4.elements() {
         // The world map that shows as the grid element g: W = M⁻¹ P(g) M.
         let p = d4.plane_matrix(g);
-        let w = m.try_inverse().expect("invertible camera map") * Matrix2::new(p[0][0], p[0][1], p[1][0], p[1][1]) * m;
+        let w = m_inv * Matrix2::new(p[0][0], p[0][1], p[1][0], p[1][1]) * m;
         let r = Matrix2::from_row_slice(rho.matrix(g));
         assert!(
             (w - r).abs().max() < 1e-6,
@@ -71,8 +72,9 @@ fn rendered_frames_put_blocks_where_the_camera_projects_them() {
     let mut cfg = equiarm_sim::EnvConfig::new(equiarm_sim::TaskKind::BlockPulling);
     cfg.camera = ViewPreset::Angle90.config();
     let mut env = equiarm_sim::Env::new(cfg).expect("env");
-    // How far the centroid is from where a transposed or mirrored frame would put it, per seed:
-    // the blocks must sit off the image's diagonals and centre lines for the check to mean much.
+    // The largest distance, over the seeds, between the centroid and where a transposed or
+    // mirrored frame would put it: the blocks must sit off the image's diagonals and centre lines
+    // in at least one scene for the check to tell those layouts apart.
     let mut alternatives = [0.0f64; 3];
     for seed in 0..4 {
         let obs = env.reset(seed).expect("reset");
