@@ -1,6 +1,7 @@
 //! Diagnostic: greedy rollouts of a checkpoint, printing per step the gripper position, the
-//! greedy action and the expert's action for the same observation; each episode's end (success,
-//! invalid or timeout) and, last, the counts.
+//! greedy action and the expert's action for the same observation; where each object started and
+//! where it was at the episode's end (xy of every body that is neither the table nor the gripper);
+//! each episode's end (success, invalid or timeout) and, last, the counts.
 //!
 //! `cargo run -p equiarm_sac --example rollout -- RUN_DIR [EPISODES]`
 use equiarm_sac::agent::ActMode;
@@ -29,6 +30,9 @@ fn run(dir: &std::path::Path, episodes: u64) -> Result<(), Box<dyn std::error::E
     for ep in 0..episodes {
         let mut o = env.reset(equiarm_sac::train::episode_seed(cfg.seed ^ equiarm_sac::train::EVAL, 0, ep))?;
         println!("episode {ep}");
+        if let Some(scene) = env.scene() {
+            println!("  start objects{}", object_positions(scene));
+        }
         for t in 0..cfg.max_episode_steps {
             let f = equiarm_sac::train::frame_of(&o)?;
             let g = l.act(&[&f], ActMode::Greedy)?[0];
@@ -38,6 +42,9 @@ fn run(dir: &std::path::Path, episodes: u64) -> Result<(), Box<dyn std::error::E
             let r = env.step(&Action::from_normalized(g))?;
             if r.done {
                 println!("  done success {} invalid {} timeout {}", r.info.success, r.info.invalid, r.info.timeout);
+                if let Some(scene) = env.scene() {
+                    println!("  objects{}", object_positions(scene));
+                }
                 wins += r.info.success as u32;
                 invalid += r.info.invalid as u32;
                 break;
@@ -47,4 +54,23 @@ fn run(dir: &std::path::Path, episodes: u64) -> Result<(), Box<dyn std::error::E
     }
     println!("{wins}/{episodes} successes, {invalid} ended early (invalid: an object left the workspace)");
     Ok(())
+}
+
+/// ` name [x y]` for each body of the scene that is neither the table nor the gripper (one entry per
+/// segmentation id, i.e. per rigid body).
+fn object_positions(scene: &equiarm_sim::world::Scene) -> String {
+    let mut out = String::new();
+    let mut seen = std::collections::BTreeSet::new();
+    for v in &scene.visuals {
+        let name = scene.seg_names.get(v.seg as usize).map(String::as_str).unwrap_or("?");
+        if name.starts_with("table") || name.starts_with("gripper") || !seen.insert(v.seg) {
+            continue;
+        }
+        let Some(body) = scene.physics.colliders.get(v.collider).and_then(|c| c.parent()) else {
+            continue;
+        };
+        let p = scene.physics.bodies[body].translation();
+        out.push_str(&format!(" {name} [{:.3} {:.3}]", p.x, p.y));
+    }
+    out
 }
