@@ -6,6 +6,9 @@
 //! in `equiarm bag info` and `equiarm bag eval`. A second test interrupts the script with SIGINT
 //! mid-run and asserts that no process of the suite is left and the bag is readable.
 //!
+//! A failing test SIGKILLs what is left of its suite ([`KillOnPanic`]), so that a 100,000-update
+//! run does not go on after it.
+//!
 //! Domains 105 and 106. The test command runs this inside a private network namespace.
 
 mod support;
@@ -19,8 +22,23 @@ fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_equiarm")
 }
 
+/// `bash` with SIGINT and SIGQUIT at their default disposition, as a terminal starts a foreground
+/// job. A test harness started as a background job of a script (`cmd &`) inherits both ignored, and
+/// bash can neither trap nor reset a signal that was ignored when it started: train.sh would then
+/// not see the Ctrl-C this test sends. (`env --default-signal` needs coreutils 8.31 or later.)
+fn bash() -> Command {
+    let reset = ["--default-signal=INT,QUIT"];
+    if Command::new("env").args(reset).arg("true").status().is_ok_and(|s| s.success()) {
+        let mut c = Command::new("env");
+        c.args(reset).arg("bash");
+        c
+    } else {
+        Command::new("bash")
+    }
+}
+
 fn train_sh(domain: u32, run_dir: &Path, updates: u32) -> Command {
-    let mut c = Command::new("bash");
+    let mut c = bash();
     c.arg(support::repo().join("launch_scripts/train.sh"))
         .args(["--num-envs", "2", "--total-updates", &updates.to_string(), "--run-dir"])
         .arg(run_dir)
@@ -37,18 +55,33 @@ fn log(run_dir: &Path, name: &str) -> String {
     std::fs::read_to_string(run_dir.join("logs").join(format!("{name}.log"))).unwrap_or_default()
 }
 
-/// Processes started with `ROS_DOMAIN_ID=domain` in their environment (each test has its own).
-fn survivors(domain: u32) -> Vec<String> {
+/// `(pid, command line)` of the processes started with `ROS_DOMAIN_ID=domain` in their environment
+/// (each test has its own domain).
+fn survivors(domain: u32) -> Vec<(String, String)> {
     let needle = format!("ROS_DOMAIN_ID={domain}");
     let mut out = Vec::new();
     for e in std::fs::read_dir("/proc").into_iter().flatten().flatten() {
         let env = std::fs::read(e.path().join("environ")).unwrap_or_default();
         if env.split(|&b| b == 0).any(|v| v == needle.as_bytes()) {
             let cmd = std::fs::read(e.path().join("cmdline")).unwrap_or_default();
-            out.push(String::from_utf8_lossy(&cmd).replace('\0', " "));
+            out.push((e.file_name().to_string_lossy().into_owned(), String::from_utf8_lossy(&cmd).replace('\0', " ")));
         }
     }
     out
+}
+
+/// On a panic (a failed assertion), SIGKILLs every process of ROS domain `.0`: the suite's nodes
+/// run in their own process groups and would otherwise outlive the test.
+struct KillOnPanic(u32);
+
+impl Drop for KillOnPanic {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            for (pid, _) in survivors(self.0) {
+                let _ = Command::new("kill").args(["-KILL", &pid]).status();
+            }
+        }
+    }
 }
 
 fn bag_opens(bag: &Path) {
@@ -65,6 +98,7 @@ fn bag_opens(bag: &Path) {
 #[test]
 fn train_sh_runs_the_suite_to_the_end() {
     let run_dir = support::scratch("suite-e2e");
+    let _cleanup = KillOnPanic(105);
     let out = train_sh(105, &run_dir, 20).stdout(Stdio::piped()).stderr(Stdio::piped()).output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "train.sh failed:\n{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
@@ -95,6 +129,7 @@ fn train_sh_runs_the_suite_to_the_end() {
 #[test]
 fn ctrl_c_stops_every_process_and_leaves_a_readable_bag() {
     let run_dir = support::scratch("suite-sigint");
+    let _cleanup = KillOnPanic(106);
     let mut child = train_sh(106, &run_dir, 100_000).process_group(0).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
     // Wait until the trainer has made updates (its checkpoints dir appears only later, so look at the log).
     let t0 = Instant::now();
