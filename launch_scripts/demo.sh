@@ -22,6 +22,7 @@
 set -euo pipefail
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 source "$here/lib.sh"
+eqa_default_signals "$0" "$@"
 
 task=block_pulling num_envs=2 episodes=3 seed=0 resolution="" out="" timeout_s=600
 usage() { sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; }

@@ -25,6 +25,7 @@
 set -euo pipefail
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 source "$here/lib.sh"
+eqa_default_signals "$0" "$@"
 
 checkpoint="" task=block_pulling episodes=20 seed=1000 preset=reduced config="" model="" out="" timeout_s=1800
 usage() { sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; }

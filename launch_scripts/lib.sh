@@ -3,6 +3,7 @@
 # each in its own process group, and stop them all (SIGINT, up to 10 s, then SIGKILL).
 #
 #   source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
+#   eqa_default_signals "$0" "$@"   # first: makes SIGINT trappable when the script started with it ignored
 #   eqa_bin                      # sets EQUIARM_BIN (builds once when it is unset)
 #   eqa_start NAME LOG cmd...    # starts cmd in a new session (own process group), logs to LOG
 #   eqa_stop_all                 # SIGINT to every group started, wait <= EQA_STOP_TIMEOUT_S, SIGKILL
@@ -15,6 +16,16 @@ EQA_STOP_TIMEOUT_S=${EQA_STOP_TIMEOUT_S:-10}
 EQA_EXIT_MESSAGE=""  # printed after everything stopped, on any exit
 EQA_DEFAULT_SIGNAL=()
 if env --default-signal=INT true 2>/dev/null; then EQA_DEFAULT_SIGNAL=(env --default-signal=INT,QUIT); fi
+
+# eqa_default_signals "$0" "$@": call before the script changes directory or parses its arguments.
+# A script started with SIGINT ignored (a background job of another script, `cmd &`) can neither trap
+# nor reset it, so Ctrl-C or `kill -INT` would not stop it; this runs the script again, in the same
+# process, with SIGINT and SIGQUIT at their defaults. Without `env --default-signal` it does nothing.
+eqa_default_signals() {
+  if [ -n "$(trap -p INT)" ] && [ ${#EQA_DEFAULT_SIGNAL[@]} -gt 0 ]; then
+    exec "${EQA_DEFAULT_SIGNAL[@]}" bash "$@"
+  fi
+}
 
 eqa_log() { printf '[%s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
 

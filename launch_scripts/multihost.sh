@@ -34,6 +34,7 @@
 set -euo pipefail
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 source "$here/lib.sh"
+eqa_default_signals "$0" "$@"
 
 task=block_pulling preset=reduced seconds=120 total_updates="" out="" check=0 cleanup_only=0
 usage() { sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; }

@@ -32,6 +32,10 @@
 #
 # Example: bash launch_scripts/train.sh --task block_pulling --num-envs 5
 set -euo pipefail
+# before lib.sh, whose default is 10 s
+export EQA_STOP_TIMEOUT_S=${EQA_STOP_TIMEOUT_S:-30}
+source "$(dirname "$0")/lib.sh"
+eqa_default_signals "$0" "$@"
 cd "$(dirname "$0")/.."
 
 task=block_pulling preset=reduced config="" num_envs=5 seed=0 run_dir="" total_updates="" record=1 det=0
@@ -56,9 +60,7 @@ run_dir=${run_dir:-runs/$task-$(date +%Y%m%d-%H%M%S)}
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0}
 export ROS_LOCALHOST_ONLY=${ROS_LOCALHOST_ONLY:-1}
 # Logging: the nodes' own default filter (info, RustDDS's per-sample warnings off) unless RUST_LOG is set.
-export EQA_STOP_TIMEOUT_S=${EQA_STOP_TIMEOUT_S:-30}
 
-source launch_scripts/lib.sh
 eqa_bin
 bin=$EQUIARM_BIN
 

@@ -4,7 +4,9 @@
 //! transitions flowed (the trainer's count), weights were broadcast and picked up (the policies'
 //! `weights version` lines), a checkpoint and the learning curve exist, and the recorded bag opens
 //! in `equiarm bag info` and `equiarm bag eval`. A second test interrupts the script with SIGINT
-//! mid-run and asserts that no process of the suite is left and the bag is readable.
+//! mid-run and asserts that no process of the suite is left and the bag is readable, also when the
+//! test itself runs with SIGINT ignored (a background job of a script): the launch scripts then run
+//! themselves again with SIGINT at its default (`eqa_default_signals` in launch_scripts/lib.sh).
 //!
 //! A failing test SIGKILLs what is left of its suite ([`KillOnPanic`]), so that a 100,000-update
 //! run does not go on after it.
@@ -22,23 +24,8 @@ fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_equiarm")
 }
 
-/// `bash` with SIGINT and SIGQUIT at their default disposition, as a terminal starts a foreground
-/// job. A test harness started as a background job of a script (`cmd &`) inherits both ignored, and
-/// bash can neither trap nor reset a signal that was ignored when it started: train.sh would then
-/// not see the Ctrl-C this test sends. (`env --default-signal` needs coreutils 8.31 or later.)
-fn bash() -> Command {
-    let reset = ["--default-signal=INT,QUIT"];
-    if Command::new("env").args(reset).arg("true").stderr(Stdio::null()).status().is_ok_and(|s| s.success()) {
-        let mut c = Command::new("env");
-        c.args(reset).arg("bash");
-        c
-    } else {
-        Command::new("bash")
-    }
-}
-
 fn train_sh(domain: u32, run_dir: &Path, updates: u32) -> Command {
-    let mut c = bash();
+    let mut c = Command::new("bash");
     c.arg(support::repo().join("launch_scripts/train.sh"))
         .args(["--num-envs", "2", "--total-updates", &updates.to_string(), "--run-dir"])
         .arg(run_dir)
