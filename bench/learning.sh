@@ -4,11 +4,14 @@
 # and a table of the final evaluation. Prints the wall time of each run.
 #
 #   bash bench/learning.sh [--task block_pulling] [--seeds "0 1"] [--models "equi cnn"]
-#                          [--out bench/out/learning] [--parallel 2] [-- extra `equiarm train` flags]
-# Runs `--parallel` trainings at once, each with RAYON_NUM_THREADS = 2 / parallel.
+#                          [--out bench/out/learning] [--parallel 2] [--features tch]
+#                          [-- extra `equiarm train` flags]
+# Runs `--parallel` trainings at once, each with RAYON_NUM_THREADS (flex) and OMP_NUM_THREADS
+# (libtorch) = 2 / parallel. `--features tch -- --device torch` trains on libtorch (README, "A faster
+# CPU learner": torch 2.9.0 on PATH, LIBTORCH_USE_PYTORCH=1 and LD_LIBRARY_PATH set).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-task=block_pulling seeds="0 1" models="equi cnn" out=bench/out/learning parallel=1
+task=block_pulling seeds="0 1" models="equi cnn" out=bench/out/learning parallel=1 features=""
 extra=()
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -17,12 +20,13 @@ while [ $# -gt 0 ]; do
     --models) models=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
     --parallel) parallel=$2; shift 2 ;;
+    --features) features=$2; shift 2 ;;
     --) shift; extra=("$@"); break ;;
     *) echo "learning.sh: unknown option $1" >&2; exit 2 ;;
   esac
 done
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/equiarm/target}"
-cargo build --locked --quiet --bin equiarm --example compare_runs -p equiarm -p equiarm_sac
+cargo build --locked --quiet --bin equiarm --example compare_runs -p equiarm -p equiarm_sac ${features:+--features "equiarm/$features"}
 bin=$CARGO_TARGET_DIR/debug/equiarm
 mkdir -p "$out"
 threads=$(( 2 / parallel )); [ "$threads" -lt 1 ] && threads=1
@@ -35,7 +39,7 @@ for j in "${jobs[@]}"; do
   rm -rf "$dir"
   (
     t0=$(date +%s)
-    RAYON_NUM_THREADS=$threads "$bin" train --in-process --preset reduced --task "$task" --model "$m" --seed "$s" \
+    RAYON_NUM_THREADS=$threads OMP_NUM_THREADS=$threads "$bin" train --in-process --preset reduced --task "$task" --model "$m" --seed "$s" \
       --run-dir "$dir" -q "${extra[@]}" > "$dir.log" 2>&1
     echo "$m seed $s: $(( $(date +%s) - t0 )) s wall" | tee "$dir.time"
   ) &

@@ -1,6 +1,7 @@
 //! Where tensors live, chosen at run time by name: `cpu` (burn's pure-Rust `flex` backend, the
-//! default) or `cuda` / `cuda:N` (an NVIDIA GPU through burn's CubeCL CUDA backend; only in a
-//! binary built with the `cuda` feature).
+//! default), `cuda` / `cuda:N` (an NVIDIA GPU through burn's CubeCL CUDA backend; only in a
+//! binary built with the `cuda` feature) or `torch` (libtorch's CPU kernels through burn's `tch`
+//! backend; only in a binary built with the `tch` feature, see the README).
 //!
 //! ```
 //! let cpu = equiarm_nn::device::parse("cpu").unwrap();
@@ -21,7 +22,7 @@ use burn::tensor::{Device, Tensor};
 use thiserror::Error;
 
 /// The device names [`parse`] accepts, for help texts and errors.
-pub const CHOICES: &str = "`cpu` (the default), `cuda` or `cuda:N` (CUDA device N)";
+pub const CHOICES: &str = "`cpu` (the default), `cuda` or `cuda:N` (CUDA device N), `torch` (libtorch on the CPU)";
 
 /// A device name that cannot be used.
 #[derive(Clone, Debug, Error, PartialEq, Eq)]
@@ -46,6 +47,14 @@ pub enum DeviceError {
         /// The name given.
         name: String,
     },
+    /// The libtorch CPU device was asked of a binary built without the `tch` feature.
+    #[error(
+        "device `{name}`: this binary was built without the `tch` feature: rebuild with `LIBTORCH_USE_PYTORCH=1 cargo build --release --features tch` in a Python environment with torch 2.9.0"
+    )]
+    NoTorch {
+        /// The name given.
+        name: String,
+    },
     /// The device is not there or could not run a tiny operation (no GPU, no driver, index out
     /// of range).
     #[error("device `{device}` is not usable: {message}")]
@@ -67,13 +76,19 @@ pub const fn cuda_enabled() -> bool {
     cfg!(feature = "cuda")
 }
 
+/// True when this binary was built with the `tch` feature (the `torch` device).
+pub const fn torch_enabled() -> bool {
+    cfg!(feature = "tch")
+}
+
 /// The device named `name` (case-insensitive, surrounding blanks ignored): `cpu` (also `flex`,
-/// burn's name for it), `cuda` (device 0) or `cuda:N`. Returns the plain (non-autodiff) device;
+/// burn's name for it), `cuda` (device 0), `cuda:N` or `torch` (also `libtorch`). Returns the plain (non-autodiff) device;
 /// callers add autodiff where they train.
 pub fn parse(name: &str) -> Result<Device, DeviceError> {
     match choice(name)? {
         Choice::Cpu => Ok(cpu()),
         Choice::Cuda(index) => cuda(index).ok_or_else(|| DeviceError::NoCuda { name: name.to_string() }),
+        Choice::Torch => torch().ok_or_else(|| DeviceError::NoTorch { name: name.to_string() }),
     }
 }
 
@@ -81,6 +96,7 @@ pub fn parse(name: &str) -> Result<Device, DeviceError> {
 enum Choice {
     Cpu,
     Cuda(usize),
+    Torch,
 }
 
 fn choice(name: &str) -> Result<Choice, DeviceError> {
@@ -89,6 +105,7 @@ fn choice(name: &str) -> Result<Choice, DeviceError> {
     match lower.as_str() {
         "cpu" | "flex" => Ok(Choice::Cpu),
         "cuda" => Ok(Choice::Cuda(0)),
+        "torch" | "libtorch" => Ok(Choice::Torch),
         other => match other.strip_prefix("cuda:") {
             Some(n) if !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()) => {
                 n.parse().map(Choice::Cuda).map_err(|_| DeviceError::BadIndex { name: given() })
@@ -106,6 +123,17 @@ fn cuda(index: usize) -> Option<Device> {
 
 #[cfg(not(feature = "cuda"))]
 fn cuda(_index: usize) -> Option<Device> {
+    None
+}
+
+#[cfg(feature = "tch")]
+#[allow(deprecated)] // burn-tch is marked deprecated in burn 0.22; it still builds and runs.
+fn torch() -> Option<Device> {
+    Some(Device::libtorch())
+}
+
+#[cfg(not(feature = "tch"))]
+fn torch() -> Option<Device> {
     None
 }
 
@@ -196,12 +224,26 @@ mod tests {
     }
 
     #[test]
+    fn the_torch_device_needs_the_tch_feature() {
+        for name in ["torch", "TORCH", " libtorch "] {
+            match open(name) {
+                Ok(d) => assert!(torch_enabled() && !d.is_autodiff() && d != cpu(), "{name}: {d:?}"),
+                Err(e @ DeviceError::NoTorch { .. }) => {
+                    assert!(!torch_enabled());
+                    assert!(e.to_string().contains("built without the `tch` feature"), "{e}");
+                }
+                Err(e) => panic!("{name}: {e}"),
+            }
+        }
+    }
+
+    #[test]
     fn unknown_names_list_the_choices() {
-        for name in ["", "gpu", "tpu", "cudaa", "cpu:0", "wgpu"] {
+        for name in ["", "gpu", "tpu", "cudaa", "cpu:0", "wgpu", "torch:0"] {
             let e = parse(name).unwrap_err();
             assert_eq!(e, DeviceError::Unknown { name: name.into() });
             let text = e.to_string();
-            assert!(text.contains("`cpu`") && text.contains("`cuda:N`"), "{text}");
+            assert!(text.contains("`cpu`") && text.contains("`cuda:N`") && text.contains("`torch`"), "{text}");
         }
     }
 

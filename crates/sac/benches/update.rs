@@ -4,11 +4,11 @@
 //! Prints a table, one `csv,` line per case and the peak RSS.
 //!
 //! `cargo bench -p equiarm_sac --bench update -- [--reps N] [--config paper|reduced|all]
-//!   [--model equi|cnn|sen|all] [--batch B] [--device cpu|cuda[:N]]`
+//!   [--model equi|cnn|sen|all] [--batch B] [--device cpu|cuda[:N]|torch] [--hidden H] [--px S]`
 //! (the bench profile builds burn in release; `--profile dev` gives close figures from the test
-//! build's target directory). Threads: burn-flex uses rayon's pool (`RAYON_NUM_THREADS`).
-//! `--device cuda` needs `--features cuda`; each timed update reads its losses back, so GPU
-//! figures include the synchronisation.
+//! build's target directory). Threads: burn-flex uses rayon's pool (`RAYON_NUM_THREADS`), libtorch
+//! `OMP_NUM_THREADS`. `--device cuda` needs `--features cuda`, `--device torch` `--features tch`
+//! (README); each timed update reads its losses back, so GPU figures include the synchronisation.
 
 use std::time::Instant;
 
