@@ -72,15 +72,16 @@ pub struct TrainArgs {
     /// Transitions in the replay before the first update.
     #[arg(long)]
     pub training_starts: Option<usize>,
-    /// Run directory (metrics, learning curve, checkpoints, config).
-    #[arg(long, default_value = "runs/latest")]
-    pub run_dir: PathBuf,
+    /// Run directory (metrics, learning curve, checkpoints, config). Default: with --resume, the
+    /// run directory being resumed (the run continues in place); otherwise runs/latest.
+    #[arg(long)]
+    pub run_dir: Option<PathBuf>,
     /// Resume from a checkpoint directory, or from a run directory's latest checkpoint.
     #[arg(long)]
     pub resume: Option<PathBuf>,
     /// Where the learner's networks run: cpu (default), cuda or cuda:N (an NVIDIA GPU; needs a
-    /// binary built with `--features cuda`; checked at start). Not part of the config: checkpoints
-    /// resume on any.
+    /// binary built with `--features cuda`), torch (libtorch's CPU kernels; needs `--features
+    /// tch`). Checked at start. Not part of the config: checkpoints resume on any.
     #[arg(long, default_value = "cpu", value_parser = equiarm_nn::device::open)]
     pub device: Device,
     /// Print the resulting config as JSON and exit.
@@ -107,6 +108,15 @@ pub struct TrainArgs {
 }
 
 impl TrainArgs {
+    /// The run directory: `--run-dir`, else the directory of the run given to `--resume`, else
+    /// `runs/latest`.
+    pub fn run_dir(&self) -> PathBuf {
+        self.run_dir
+            .clone()
+            .or_else(|| self.resume.as_deref().and_then(equiarm_sac::train::run_dir_of))
+            .unwrap_or_else(|| PathBuf::from("runs/latest"))
+    }
+
     /// The validated config these options describe.
     pub fn build_config(&self) -> anyhow::Result<TrainConfig> {
         let task = self.task.clone().unwrap_or_else(|| "block_pulling".into());
@@ -160,7 +170,7 @@ pub fn run_in_process(args: &TrainArgs, cfg: TrainConfig) -> anyhow::Result<RunS
         Some(p) => Some(equiarm_sac::train::find_checkpoint(p)?),
         None => None,
     };
-    let opts = RunOptions { run_dir: args.run_dir.clone(), resume, stop_at: None, progress: !args.quiet, device: args.device.clone() };
+    let opts = RunOptions { run_dir: args.run_dir(), resume, stop_at: None, progress: !args.quiet, device: args.device.clone() };
     let flag = stop.clone();
     let summary = equiarm_sac::train::run(cfg, &opts, &move || flag.load(Ordering::Relaxed))?;
     Ok(summary)
@@ -240,6 +250,22 @@ mod tests {
         assert_eq!(cfg.agent.hidden, 16);
         assert_eq!((cfg.image_size, cfg.agent.input_size), (76, 64));
         assert_eq!(cfg.batch_size, base.batch_size);
+    }
+
+    #[test]
+    fn resume_continues_in_the_resumed_run_directory() {
+        let root = std::env::temp_dir().join(format!("equiarm_train_cli_run_dir_{}", std::process::id()));
+        let ck = root.join("run").join("checkpoints").join("step_0000010");
+        std::fs::create_dir_all(&ck).unwrap();
+        std::fs::write(ck.join("manifest.json"), "{}").unwrap();
+        let run_dir = |args: &[&str]| Cli::try_parse_from(std::iter::once("train").chain(args.iter().copied())).unwrap().train.run_dir();
+        let (run, ck_s) = (root.join("run"), ck.to_string_lossy().into_owned());
+        let run_s = run.to_string_lossy().into_owned();
+        assert_eq!(run_dir(&[]), PathBuf::from("runs/latest"));
+        assert_eq!(run_dir(&["--resume", &run_s]), run);
+        assert_eq!(run_dir(&["--resume", &ck_s]), run);
+        assert_eq!(run_dir(&["--resume", &ck_s, "--run-dir", "elsewhere"]), PathBuf::from("elsewhere"));
+        std::fs::remove_dir_all(&root).ok();
     }
 
     #[test]

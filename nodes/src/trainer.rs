@@ -140,8 +140,8 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
         anyhow::bail!("--deterministic does not resume (--resume): the policies count rounds from the first weights version of a fresh run");
     }
     let started = Instant::now();
-    let dir = args.run_dir.clone();
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let dir = args.run_dir();
+    let _claim = equiarm_sac::train::RunDirLock::acquire(&dir)?;
     write_json(&dir.join("config.json"), &cfg).map_err(anyhow::Error::msg)?;
     let mut learner = Learner::with_device(cfg.clone(), args.device.clone())?;
     let mut st = NodeState::default();

@@ -234,7 +234,7 @@ impl Default for RunOptions {
 /// the loop writes a checkpoint and returns.
 pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Result<RunSummary, TrainError> {
     let io = |path: &Path, e: &dyn std::fmt::Display| TrainError::Io { path: path.into(), message: e.to_string() };
-    std::fs::create_dir_all(&opts.run_dir).map_err(|e| io(&opts.run_dir, &e))?;
+    let _claim = RunDirLock::acquire(&opts.run_dir)?;
     let started = Instant::now();
     let mut learner = Learner::with_device(cfg.clone(), opts.device.clone())?;
     let env_cfg = env_config(&cfg);
@@ -443,6 +443,58 @@ pub fn write_latest(run_dir: &Path, updates: u64) -> Result<(), TrainError> {
     std::fs::rename(&tmp, root.join("latest")).map_err(io)
 }
 
+/// The run directory a checkpoint directory belongs to (`RUN/checkpoints/step_N` → `RUN`), or
+/// `path` itself when it is a run directory. `None` for a checkpoint outside a run's
+/// `checkpoints/` folder.
+pub fn run_dir_of(path: &Path) -> Option<PathBuf> {
+    if !path.join("manifest.json").is_file() {
+        return Some(path.to_path_buf());
+    }
+    let parent = path.parent()?;
+    (parent.file_name()? == "checkpoints").then(|| parent.parent().map(Path::to_path_buf)).flatten()
+}
+
+/// An exclusive claim on a run directory for as long as it lives: a second training process
+/// pointed at the same directory is refused instead of interleaving its metrics and checkpoints
+/// with the first one's. An advisory lock on `RUN/.lock` (which holds the owner's pid), released
+/// by the OS when the process ends, so a killed run leaves no stale claim.
+#[derive(Debug)]
+pub struct RunDirLock {
+    _file: std::fs::File,
+}
+
+impl RunDirLock {
+    /// Create `run_dir` if needed and claim it.
+    pub fn acquire(run_dir: &Path) -> Result<Self, TrainError> {
+        let io = |path: &Path, message: String| TrainError::Io { path: path.into(), message };
+        std::fs::create_dir_all(run_dir).map_err(|e| io(run_dir, e.to_string()))?;
+        let path = run_dir.join(".lock");
+        let mut file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(|e| io(&path, e.to_string()))?;
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                let owner = std::fs::read_to_string(&path).unwrap_or_default();
+                let owner = owner.trim();
+                let who = if owner.is_empty() { String::new() } else { format!(" (pid {owner})") };
+                return Err(io(
+                    run_dir,
+                    format!("the run directory is in use by another training process{who}: wait for it to end or choose another --run-dir"),
+                ));
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(io(&path, format!("cannot lock: {e}"))),
+        }
+        use std::io::Write;
+        file.set_len(0).and_then(|_| writeln!(file, "{}", std::process::id())).map_err(|e| io(&path, e.to_string()))?;
+        Ok(RunDirLock { _file: file })
+    }
+}
+
 /// The newest checkpoint of a run directory (from `checkpoints/latest`), or `path` itself if it is
 /// a checkpoint directory.
 pub fn find_checkpoint(path: &Path) -> Result<PathBuf, TrainError> {
@@ -471,4 +523,39 @@ pub fn write_curve(run_dir: &Path, cfg: &TrainConfig, evals: &[EvalResult]) -> R
     };
     let path = run_dir.join("learning_curve.png");
     write_png(&path, &chart, &series).map_err(|e| TrainError::Io { path, message: e.to_string() })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_run_directory_is_claimed_by_one_process_at_a_time() {
+        let dir = crate::scratch::Scratch::new("run_lock");
+        let first = RunDirLock::acquire(&dir).unwrap();
+        let text = std::fs::read_to_string(dir.join(".lock")).unwrap();
+        assert_eq!(text.trim(), std::process::id().to_string());
+        // A second claim (another open file, as another process would have) is refused, naming
+        // the directory, the owner and the fix.
+        let e = RunDirLock::acquire(&dir).unwrap_err().to_string();
+        assert!(e.contains(&*dir.to_string_lossy()) && e.contains("in use by another training process"), "{e}");
+        assert!(e.contains(&format!("pid {}", std::process::id())) && e.contains("--run-dir"), "{e}");
+        drop(first);
+        let again = RunDirLock::acquire(&dir).unwrap();
+        drop(again);
+    }
+
+    #[test]
+    fn a_checkpoint_knows_its_run_directory() {
+        let dir = crate::scratch::Scratch::new("run_dir_of");
+        let ck = dir.join("run").join("checkpoints").join("step_0000010");
+        std::fs::create_dir_all(&ck).unwrap();
+        std::fs::write(ck.join("manifest.json"), "{}").unwrap();
+        assert_eq!(run_dir_of(&ck), Some(dir.join("run")));
+        assert_eq!(run_dir_of(&dir.join("run")), Some(dir.join("run")));
+        let loose = dir.join("loose");
+        std::fs::create_dir_all(&loose).unwrap();
+        std::fs::write(loose.join("manifest.json"), "{}").unwrap();
+        assert_eq!(run_dir_of(&loose), None);
+    }
 }
