@@ -3,7 +3,7 @@
 # config, 2 seeds each, in-process, then one PNG with both curves (mean ± standard error over seeds)
 # and a table of the final evaluation. Prints the wall time of each run.
 #
-#   bash bench/learning.sh [--task block_pulling] [--seeds "0 1"] [--models "equi cnn"]
+#   bash bench/learning.sh [--task block_pulling] [--preset reduced] [--seeds "0 1"] [--models "equi cnn"]
 #                          [--out bench/out/learning] [--parallel 2] [--features tch]
 #                          [-- extra `equiarm train` flags]
 # Runs `--parallel` trainings at once, each with RAYON_NUM_THREADS (flex) and OMP_NUM_THREADS
@@ -11,11 +11,12 @@
 # CPU learner": torch 2.9.0 on PATH, LIBTORCH_USE_PYTORCH=1 and LD_LIBRARY_PATH set).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-task=block_pulling seeds="0 1" models="equi cnn" out=bench/out/learning parallel=1 features=""
+task=block_pulling preset=reduced seeds="0 1" models="equi cnn" out=bench/out/learning parallel=1 features=""
 extra=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --task) task=$2; shift 2 ;;
+    --preset) preset=$2; shift 2 ;;
     --seeds) seeds=$2; shift 2 ;;
     --models) models=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
@@ -39,7 +40,7 @@ for j in "${jobs[@]}"; do
   rm -rf "$dir"
   (
     t0=$(date +%s)
-    RAYON_NUM_THREADS=$threads OMP_NUM_THREADS=$threads "$bin" train --in-process --preset reduced --task "$task" --model "$m" --seed "$s" \
+    RAYON_NUM_THREADS=$threads OMP_NUM_THREADS=$threads "$bin" train --in-process --preset "$preset" --task "$task" --model "$m" --seed "$s" \
       --run-dir "$dir" -q "${extra[@]}" > "$dir.log" 2>&1
     echo "$m seed $s: $(( $(date +%s) - t0 )) s wall" | tee "$dir.time"
   ) &

@@ -22,7 +22,7 @@ FRAME, INPUT and H (and the default model) come from the preset's config,
 `equiarm train --print-config`), or from the file given as `config:=FILE.json`, which the trainer
 then gets with `--config` instead of `--preset`.
 
-Arguments: task, preset (reduced | paper), num_envs, seed, run_dir, total_updates (empty: the
+Arguments: task, preset (reduced | reduced16 | paper), num_envs, seed, run_dir, total_updates (empty: the
 preset's), model (empty: the config's), config (empty: the preset's file), deterministic (true: the
 lock-step mode of `train.sh --deterministic`), equiarm (path of the
 binary; default `equiarm` on PATH). ROS_DOMAIN_ID and the other ROS variables of the environment
@@ -43,7 +43,7 @@ EVAL_SEED_OFFSET = 999
 
 ARGUMENTS = [
     ("task", "block_pulling", "block_pulling, block_pushing, block_picking, drawer_opening or block_in_bowl"),
-    ("preset", "reduced", "reduced (2-core CPU) or paper (PAPER_SPEC sizes)"),
+    ("preset", "reduced", "reduced (2-core CPU), reduced16 (hidden 16, 5,000 updates) or paper (PAPER_SPEC sizes)"),
     ("num_envs", "5", "training sim+policy pairs /env0 ... /envN-1"),
     ("seed", "0", "base seed S: env K uses 1000*S+K, the eval env 1000*S+999 (as train.sh)"),
     ("run_dir", "runs/launch", "run directory of the trainer; the bag goes to <run_dir>/bag"),

@@ -8,7 +8,7 @@
 #   --task T           block_pulling (default), block_pushing, block_picking, drawer_opening, block_in_bowl
 #   --episodes M       evaluation episodes (default 20)
 #   --seed S           base seed of the episodes (default 1000; the same S gives the same M scenes)
-#   --preset P         reduced (default) or paper: the network's sizes (image FRAME:INPUT, hidden, model)
+#   --preset P         reduced (default), reduced16 or paper: the network's sizes (image FRAME:INPUT, hidden, model)
 #                      come from launch_scripts/configs/<preset>_<task>.json
 #   --config FILE      a training config JSON to read those sizes from instead (e.g. RUN/config.json)
 #   --model M          equi, cnn or sen (default: the config's)

@@ -13,7 +13,7 @@
 #
 # Options:
 #   --task T             task (default block_pulling)
-#   --preset P           reduced (default) or paper
+#   --preset P           reduced (default), reduced16 or paper
 #   --seconds S          run for S seconds, then stop (default 120; 0: until the trainer exits)
 #   --total-updates U    pass --total-updates U to the trainer (the run ends when it exits)
 #   --out DIR            run directory (trainer's run dir DIR/run, bag DIR/bag, logs DIR/logs;

@@ -15,7 +15,7 @@
 #
 # Options (defaults: the reduced CPU config of block pulling, 5 envs, seed 0):
 #   --task T            block_pulling | block_pushing | block_picking | drawer_opening | block_in_bowl
-#   --preset P          reduced (2-core CPU) | paper (PAPER_SPEC §2, for a GPU)
+#   --preset P          reduced (2-core CPU) | reduced16 (hidden 16, 5,000 updates) | paper (PAPER_SPEC §2, for a GPU)
 #   --config FILE       a JSON run config (launch_scripts/configs/*.json); replaces the preset
 #   --num-envs N        sim+policy pairs (the paper uses 5)
 #   --seed S            base seed

@@ -1,7 +1,7 @@
 //! `equiarm train`: the options shared by the in-process loop (`--in-process`) and the trainer node
 //! over DDS, turned into one validated [`TrainConfig`], and the in-process runner.
 //!
-//! The config is built in this order: the preset (`--preset reduced|paper`, for `--task`), then a
+//! The config is built in this order: the preset (`--preset reduced|reduced16|paper`, for `--task`), then a
 //! JSON file (`--config`, which replaces the preset), then the individual flags. `--print-config`
 //! shows the result without running.
 
@@ -21,7 +21,9 @@ pub struct TrainArgs {
     /// Run the envs inside this process (no DDS): the transport-free loop.
     #[arg(long)]
     pub in_process: bool,
-    /// Preset: `reduced` (2-core CPU) or `paper` (PAPER_SPEC §2; meant for a GPU).
+    /// Preset: `reduced` (2-core CPU, fast), `reduced16` (the same frames at hidden 16 and the
+    /// paper's update count: about an hour with `--device torch`) or `paper` (PAPER_SPEC §2; meant
+    /// for a GPU).
     #[arg(long, default_value = "reduced")]
     pub preset: String,
     /// JSON config file (replaces the preset; flags below still override it).
@@ -126,7 +128,7 @@ impl TrainArgs {
                 TrainConfig::from_json(&text).map_err(|e| anyhow::anyhow!("config {}: {e}", path.display()))?
             }
             None => TrainConfig::preset(&self.preset, &task)
-                .ok_or_else(|| anyhow::anyhow!("unknown --preset `{}`: use reduced or paper", self.preset))?,
+                .ok_or_else(|| anyhow::anyhow!("unknown --preset `{}`: use {}", self.preset, TrainConfig::PRESETS))?,
         };
         if let Some(t) = &self.task
             && (self.config.is_some() || t != &cfg.task)
