@@ -8,7 +8,7 @@
 #                          [-- extra `equiarm train` flags]
 # Runs `--parallel` trainings at once, each with RAYON_NUM_THREADS (flex) and OMP_NUM_THREADS
 # (libtorch) = 2 / parallel. `--features tch -- --device torch` trains on libtorch (README, "A faster
-# CPU learner": torch 2.9.0 on PATH, LIBTORCH_USE_PYTORCH=1 and LD_LIBRARY_PATH set).
+# CPU learner": torch 2.9.0 first on PATH and LIBTORCH_USE_PYTORCH=1).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 task=block_pulling preset=reduced seeds="0 1" models="equi cnn" out=bench/out/learning parallel=1 features=""
@@ -29,6 +29,11 @@ done
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/equiarm/target}"
 cargo build --locked --quiet --bin equiarm --example compare_runs -p equiarm -p equiarm_sac ${features:+--features "equiarm/$features"}
 bin=$CARGO_TARGET_DIR/debug/equiarm
+if [[ " $features " == *" tch "* ]]; then
+  # compare_runs (an equiarm_sac example) is linked against libtorch too; equiarm has an rpath.
+  torch_lib=$(python -c 'import os, torch; print(os.path.join(os.path.dirname(torch.__file__), "lib"))')
+  export LD_LIBRARY_PATH="$torch_lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+fi
 mkdir -p "$out"
 threads=$(( 2 / parallel )); [ "$threads" -lt 1 ] && threads=1
 jobs=()
