@@ -457,7 +457,8 @@ pub fn run_dir_of(path: &Path) -> Option<PathBuf> {
 /// An exclusive claim on a run directory for as long as it lives: a second training process
 /// pointed at the same directory is refused instead of interleaving its metrics and checkpoints
 /// with the first one's. An advisory lock on `RUN/.lock` (which holds the owner's pid), released
-/// by the OS when the process ends, so a killed run leaves no stale claim.
+/// by the OS when the process ends, so a killed run leaves no stale claim. On a filesystem without
+/// file locks the run goes on unguarded, with a warning.
 #[derive(Debug)]
 pub struct RunDirLock {
     _file: std::fs::File,
@@ -486,6 +487,10 @@ impl RunDirLock {
                     run_dir,
                     format!("the run directory is in use by another training process{who}: wait for it to end or choose another --run-dir"),
                 ));
+            }
+            // A filesystem without file locks (some network mounts): run unguarded, as before.
+            Err(std::fs::TryLockError::Error(e)) if e.kind() == std::io::ErrorKind::Unsupported => {
+                log::warn!("{}: file locks are not supported here ({e}); not guarding the run directory", path.display());
             }
             Err(std::fs::TryLockError::Error(e)) => return Err(io(&path, format!("cannot lock: {e}"))),
         }
