@@ -5,7 +5,7 @@
 //!
 //! Feature maps are `[batch, channels, height, width]` tensors whose channels are laid out by a
 //! [`FieldType`]. The convolution's free weights times the solved basis give the dense kernel
-//! inside the autodiff graph; burn's conv2d does the rest.
+//! inside the autodiff graph; our convolution kernels ([`crate::kernels`]) do the rest.
 //!
 //! Limitations: stride 1 only; kernel sizes 1 and 3 (see [`crate::basis`]); pointwise ReLU and
 //! max-pooling are only equivariant for permutation representations (trivial, regular,
@@ -45,11 +45,14 @@ pub enum LayerError {
     },
 }
 
-/// How convolutions are computed (both give the same result up to float rounding).
+/// How convolutions are computed (all give the same result up to float rounding).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ConvAlgo {
+    /// Our kernels ([`crate::kernels`]): im2col + large GEMMs forward and backward, bias and
+    /// ReLU fused, on `flex`; burn's `conv2d` on other backends. The default.
+    Kernels,
     /// burn's `conv2d` (im2col + gemm forward; its backward is a transposed conv and a conv
-    /// with an H×W kernel for the weight gradient).
+    /// with an H×W kernel for the weight gradient): the reference the kernels are tested against.
     Burn,
     /// [`conv2d_unfold`]: 9 shifted slices + one batched matmul; autodiff through matmuls.
     /// NOTE: measured about 2× slower than `Burn` for a training step on flex (the slices, the
@@ -60,8 +63,9 @@ pub enum ConvAlgo {
 
 static CONV_ALGO: std::sync::atomic::AtomicU8 = std::sync::atomic::AtomicU8::new(0);
 
-/// Choose the convolution algorithm for all layers of this process (default [`ConvAlgo::Burn`]).
-/// A process-wide switch so that benchmarks can compare both on the same networks.
+/// Choose the convolution algorithm for all layers of this process (default
+/// [`ConvAlgo::Kernels`]). A process-wide switch so that tests and benchmarks can compare them on
+/// the same networks.
 pub fn set_conv_algo(algo: ConvAlgo) {
     CONV_ALGO.store(algo as u8, std::sync::atomic::Ordering::Relaxed);
 }
@@ -69,17 +73,21 @@ pub fn set_conv_algo(algo: ConvAlgo) {
 /// The current convolution algorithm.
 pub fn conv_algo() -> ConvAlgo {
     match CONV_ALGO.load(std::sync::atomic::Ordering::Relaxed) {
-        1 => ConvAlgo::Unfold,
-        _ => ConvAlgo::Burn,
+        1 => ConvAlgo::Burn,
+        2 => ConvAlgo::Unfold,
+        _ => ConvAlgo::Kernels,
     }
 }
 
-/// Stride-1 convolution with the algorithm chosen by [`set_conv_algo`].
-pub fn conv2d_stride1(x: Tensor<4>, kernel: Tensor<4>, bias: Option<Tensor<1>>, padding: usize) -> Tensor<4> {
-    match conv_algo() {
-        ConvAlgo::Burn => conv2d(x, kernel, bias, ConvOptions::new([1, 1], [padding, padding], [1, 1], 1)),
-        ConvAlgo::Unfold => conv2d_unfold(x, kernel, bias, padding),
-    }
+/// Stride-1 convolution with the algorithm chosen by [`set_conv_algo`], followed by ReLU when
+/// `relu` (fused into the kernels' passes with [`ConvAlgo::Kernels`]).
+pub fn conv2d_stride1(x: Tensor<4>, kernel: Tensor<4>, bias: Tensor<1>, padding: usize, relu: bool) -> Tensor<4> {
+    let y = match conv_algo() {
+        ConvAlgo::Kernels => return crate::kernels::conv2d_fused(x, kernel, bias, padding, relu),
+        ConvAlgo::Burn => conv2d(x, kernel, Some(bias), ConvOptions::new([1, 1], [padding, padding], [1, 1], 1)),
+        ConvAlgo::Unfold => conv2d_unfold(x, kernel, Some(bias), padding),
+    };
+    if relu { self::relu(y) } else { y }
 }
 
 /// Structure of one (output run, input run) block of an equivariant conv.
@@ -275,12 +283,21 @@ impl EquivariantConv {
 
     /// Forward pass: `[B, in_channels, H, W] → [B, out_channels, H + 2p − k + 1, W + 2p − k + 1]`.
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        self.forward_act(x, false)
+    }
+
+    /// [`EquivariantConv::forward`] followed by [`relu`] (fused into the convolution's passes).
+    pub fn forward_relu(&self, x: Tensor<4>) -> Tensor<4> {
+        self.forward_act(x, true)
+    }
+
+    fn forward_act(&self, x: Tensor<4>, relu: bool) -> Tensor<4> {
         let kernel = match &self.cached {
             Some(k) if self.uses_cached_kernel() => k.clone(),
             _ => self.kernel(),
         };
         let bias = self.dense_bias(&x.device());
-        conv2d_stride1(x, kernel, Some(bias), self.padding)
+        conv2d_stride1(x, kernel, bias, self.padding, relu)
     }
 
     /// Number of input channels.
@@ -303,7 +320,10 @@ pub fn relu<const D: usize>(x: Tensor<D>) -> Tensor<D> {
 /// 2×2 max-pool with stride 2, per channel (e2cnn `PointwiseMaxPool`). Field type unchanged;
 /// equivariant for permutation representations and even spatial sizes.
 pub fn max_pool2(x: Tensor<4>) -> Tensor<4> {
-    max_pool2d(x, MaxPoolOptions::new([2, 2]))
+    match conv_algo() {
+        ConvAlgo::Kernels => crate::kernels::max_pool2x2(x),
+        ConvAlgo::Burn | ConvAlgo::Unfold => max_pool2d(x, MaxPoolOptions::new([2, 2])),
+    }
 }
 
 /// Group pooling (e2cnn `GroupPooling`): max over the channels of each field. Input: `fields`

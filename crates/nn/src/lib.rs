@@ -4,6 +4,8 @@
 //! - [`group`]: the groups `C_n` / `D_n` and their action on the plane and the pixel grid.
 //! - [`repr`]: representations (trivial, regular, irreducible, quotient) and field types.
 //! - [`basis`]: the generic equivariant kernel basis solver (e2cnn's `R2Conv` function space).
+//! - [`kernels`]: our convolution forward and backward (im2col + GEMM, bias and ReLU fused) as a
+//!   custom op of the `flex` backend.
 //! - [`layers`]: equivariant conv, ReLU, max-pool, group pooling, concatenation, group action.
 //! - [`nets`]: the paper's networks (Equi / CNN / SEN SAC actor and critic, rotation nets).
 //! - [`checkpoint`]: safetensors save / load with readable names and architecture checks.
@@ -31,6 +33,7 @@ pub mod device;
 pub mod diagnostics;
 pub mod group;
 pub mod init;
+pub mod kernels;
 pub mod layers;
 pub mod nets;
 pub mod plain;

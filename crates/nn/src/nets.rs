@@ -151,7 +151,7 @@ impl EquiEncoder {
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let mut x = x;
         for (conv, &pool) in self.convs.iter().zip(&self.pools) {
-            x = relu(conv.forward(x));
+            x = conv.forward_relu(x);
             if pool {
                 x = max_pool2(x);
             }
@@ -280,7 +280,7 @@ impl EquiQHead {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<2> {
-        let h = group_pool(relu(self.conv1.forward(x)), self.fields, self.dim);
+        let h = group_pool(self.conv1.forward_relu(x), self.fields, self.dim);
         let q = self.conv2.forward(h);
         let [b, _, _, _] = q.dims();
         q.reshape([b, 1])
@@ -348,7 +348,7 @@ impl CnnEncoder {
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let mut x = x;
         for (conv, &pool) in self.convs.iter().zip(&self.pools) {
-            x = relu(conv.forward(x));
+            x = conv.forward_relu(x);
             if pool {
                 x = max_pool2(x);
             }
@@ -402,7 +402,7 @@ pub struct CnnQHead {
 
 impl CnnQHead {
     fn forward(&self, x: Tensor<4>) -> Tensor<2> {
-        let q = self.conv2.forward(relu(self.conv1.forward(x)));
+        let q = self.conv2.forward(self.conv1.forward_relu(x));
         let [b, _, _, _] = q.dims();
         q.reshape([b, 1])
     }
@@ -464,7 +464,7 @@ impl SenEncoder {
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let mut x = x;
         for (conv, &pool) in self.convs.iter().zip(&self.pools) {
-            x = relu(conv.forward(x));
+            x = conv.forward_relu(x);
             if pool {
                 x = max_pool2(x);
             }
@@ -582,7 +582,7 @@ impl RotCnnNet {
     pub fn forward(&self, x: Tensor<4>) -> Tensor<2> {
         let mut x = x;
         for (conv, &pool) in self.convs.iter().zip(&self.pools) {
-            x = relu(conv.forward(x));
+            x = conv.forward_relu(x);
             if pool {
                 x = max_pool2(x);
             }

@@ -30,7 +30,12 @@ impl Conv {
 
     /// `[B, in, H, W] → [B, out, H + 2p − k + 1, W + 2p − k + 1]`.
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        crate::layers::conv2d_stride1(x, self.weight.val(), Some(self.bias.val()), self.padding)
+        crate::layers::conv2d_stride1(x, self.weight.val(), self.bias.val(), self.padding, false)
+    }
+
+    /// [`Conv::forward`] followed by ReLU (fused into the convolution's passes).
+    pub fn forward_relu(&self, x: Tensor<4>) -> Tensor<4> {
+        crate::layers::conv2d_stride1(x, self.weight.val(), self.bias.val(), self.padding, true)
     }
 }
 

@@ -1,0 +1,503 @@
+//! Stride-1 2-D convolution on `f32` slices in NCHW layout, forward and backward, as large GEMMs
+//! (the `gemm` crate, whose AVX-512 / AVX2 / SSE kernels are chosen at run time).
+//!
+//! Each call splits the batch into one contiguous range per rayon thread; a thread walks its range
+//! in chunks of samples small enough that their im2col matrix stays in cache-friendly bounds, and
+//! for each chunk runs one GEMM whose inner dimension is `C·k·k` (forward, input gradient) or
+//! `chunk·H'·W'` (weight gradient). Bias and ReLU are fused into the pass that scatters the
+//! GEMM's result into NCHW; the ReLU mask and the bias gradient into the pass that gathers the
+//! output gradient. Partial weight and bias gradients are summed over the threads in thread order,
+//! so results are bit-identical from run to run at a given thread count.
+
+use gemm::{gemm, Parallelism};
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// FLOPs (2 per multiply-add) of every GEMM these kernels ran in this process.
+static FLOPS: AtomicU64 = AtomicU64::new(0);
+
+/// FLOPs of the GEMMs run by the convolution kernels since the process started (or since
+/// [`reset_flop_count`]): the work of forward, input-gradient and weight-gradient passes,
+/// counted from their shapes (`2·m·n·k` per GEMM). For benchmarks.
+pub fn flop_count() -> u64 {
+    FLOPS.load(Ordering::Relaxed)
+}
+
+/// Sets [`flop_count`] back to zero.
+pub fn reset_flop_count() {
+    FLOPS.store(0, Ordering::Relaxed);
+}
+
+/// The shape of one stride-1 convolution: input `[batch, cin, h, w]`, kernel `[cout, cin, k, k]`,
+/// zero padding `pad` on every side.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ConvShape {
+    /// Samples.
+    pub batch: usize,
+    /// Input channels.
+    pub cin: usize,
+    /// Input height.
+    pub h: usize,
+    /// Input width.
+    pub w: usize,
+    /// Output channels.
+    pub cout: usize,
+    /// Kernel size (square).
+    pub k: usize,
+    /// Zero padding on each side.
+    pub pad: usize,
+}
+
+/// Largest im2col chunk, in floats (16 MiB): bounds the scratch memory per thread.
+const CHUNK_FLOATS: usize = 4 << 20;
+
+impl ConvShape {
+    /// Output height `h + 2·pad − k + 1`.
+    pub fn out_h(&self) -> usize {
+        self.h + 2 * self.pad + 1 - self.k
+    }
+
+    /// Output width `w + 2·pad − k + 1`.
+    pub fn out_w(&self) -> usize {
+        self.w + 2 * self.pad + 1 - self.k
+    }
+
+    /// Whether the shape describes a convolution with a non-empty output.
+    pub fn is_valid(&self) -> bool {
+        self.k > 0 && self.h + 2 * self.pad >= self.k && self.w + 2 * self.pad >= self.k
+    }
+
+    /// GEMM inner dimension of the forward pass: `cin·k·k`.
+    fn kdim(&self) -> usize {
+        self.cin * self.k * self.k
+    }
+
+    fn in_len(&self) -> usize {
+        self.cin * self.h * self.w
+    }
+
+    fn out_pixels(&self) -> usize {
+        self.out_h() * self.out_w()
+    }
+
+    fn out_len(&self) -> usize {
+        self.cout * self.out_pixels()
+    }
+
+    /// Multiply-adds of the forward pass, times two (FLOPs).
+    pub fn forward_flops(&self) -> f64 {
+        2.0 * (self.batch * self.cout * self.out_pixels() * self.kdim()) as f64
+    }
+
+    /// Samples per chunk: as many as keep the im2col matrix under [`CHUNK_FLOATS`].
+    fn chunk(&self) -> usize {
+        let per_sample = (self.kdim() * self.out_pixels()).max(1);
+        (CHUNK_FLOATS / per_sample).max(1)
+    }
+}
+
+/// The batch split into one contiguous range per thread (fewer when the batch is smaller).
+fn thread_ranges(batch: usize) -> Vec<(usize, usize)> {
+    let parts = rayon::current_num_threads().clamp(1, batch.max(1));
+    (0..parts).map(|t| (batch * t / parts, batch * (t + 1) / parts)).filter(|(a, b)| b > a).collect()
+}
+
+/// The im2col matrix of samples `x` (`n` samples, contiguous NCHW): `[cin·k·k, n·H'·W']`, rows in
+/// the kernel's `(c, ky, kx)` order, columns in `(sample, oy, ox)` order.
+fn im2col(s: &ConvShape, x: &[f32], n: usize, cols: &mut [f32]) {
+    let (k, pad, h, w) = (s.k, s.pad, s.h, s.w);
+    let (ho, wo) = (s.out_h(), s.out_w());
+    let ncols = n * ho * wo;
+    debug_assert_eq!(cols.len(), s.kdim() * ncols);
+    for c in 0..s.cin {
+        for ky in 0..k {
+            for kx in 0..k {
+                let row = &mut cols[((c * k + ky) * k + kx) * ncols..][..ncols];
+                // Output columns ox whose input column ix = ox + kx − pad lies in [0, w).
+                let lo = pad.saturating_sub(kx).min(wo);
+                let hi = (w + pad).saturating_sub(kx).min(wo).max(lo);
+                for i in 0..n {
+                    let plane = &x[(i * s.cin + c) * h * w..][..h * w];
+                    for oy in 0..ho {
+                        let dst = &mut row[(i * ho + oy) * wo..][..wo];
+                        let iy = oy + ky;
+                        if iy < pad || iy >= h + pad {
+                            dst.fill(0.0);
+                            continue;
+                        }
+                        let src = &plane[(iy - pad) * w..][..w];
+                        dst[..lo].fill(0.0);
+                        dst[hi..].fill(0.0);
+                        let start = lo + kx - pad;
+                        dst[lo..hi].copy_from_slice(&src[start..start + (hi - lo)]);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Adds the im2col-shaped `cols` back into the NCHW input gradient `dx` of `n` samples (the
+/// adjoint of [`im2col`]).
+fn col2im(s: &ConvShape, cols: &[f32], n: usize, dx: &mut [f32]) {
+    let (k, pad, h, w) = (s.k, s.pad, s.h, s.w);
+    let (ho, wo) = (s.out_h(), s.out_w());
+    let ncols = n * ho * wo;
+    for c in 0..s.cin {
+        for ky in 0..k {
+            for kx in 0..k {
+                let row = &cols[((c * k + ky) * k + kx) * ncols..][..ncols];
+                let lo = pad.saturating_sub(kx).min(wo);
+                let hi = (w + pad).saturating_sub(kx).min(wo).max(lo);
+                for i in 0..n {
+                    let plane = &mut dx[(i * s.cin + c) * h * w..][..h * w];
+                    for oy in 0..ho {
+                        let iy = oy + ky;
+                        if iy < pad || iy >= h + pad {
+                            continue;
+                        }
+                        let src = &row[(i * ho + oy) * wo..][..wo];
+                        let start = lo + kx - pad;
+                        let dst = &mut plane[(iy - pad) * w + start..][..hi - lo];
+                        for (d, v) in dst.iter_mut().zip(&src[lo..hi]) {
+                            *d += v;
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// `dst (m×n) = [dst +] lhs (m×k) · rhs (k×n)` with explicit row and column strides (in floats).
+#[allow(clippy::too_many_arguments)]
+fn matmul(
+    m: usize,
+    n: usize,
+    k: usize,
+    dst: &mut [f32],
+    dst_rs: usize,
+    accumulate: bool,
+    lhs: &[f32],
+    (lhs_rs, lhs_cs): (usize, usize),
+    rhs: &[f32],
+    (rhs_rs, rhs_cs): (usize, usize),
+) {
+    if m == 0 || n == 0 {
+        return;
+    }
+    if k == 0 {
+        if !accumulate {
+            for r in 0..m {
+                dst[r * dst_rs..][..n].fill(0.0);
+            }
+        }
+        return;
+    }
+    FLOPS.fetch_add(2 * (m * n * k) as u64, Ordering::Relaxed);
+    // The largest element each operand's strides reach must lie inside its slice.
+    assert!((m - 1) * dst_rs + n <= dst.len(), "gemm dst out of bounds");
+    assert!((m - 1) * lhs_rs + (k - 1) * lhs_cs < lhs.len(), "gemm lhs out of bounds");
+    assert!((k - 1) * rhs_rs + (n - 1) * rhs_cs < rhs.len(), "gemm rhs out of bounds");
+    // SAFETY: the three assertions above keep every element the strides address inside the
+    // slices; `dst` is borrowed mutably and does not alias `lhs` or `rhs`.
+    unsafe {
+        gemm(
+            m,
+            n,
+            k,
+            dst.as_mut_ptr(),
+            1,
+            dst_rs as isize,
+            accumulate,
+            lhs.as_ptr(),
+            lhs_cs as isize,
+            lhs_rs as isize,
+            rhs.as_ptr(),
+            rhs_cs as isize,
+            rhs_rs as isize,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            Parallelism::None,
+        );
+    }
+}
+
+/// Forward: `y = act(conv(x, weight) + bias)`, `x` `[batch, cin, h, w]`, `weight`
+/// `[cout, cin, k, k]`, `bias` `[cout]`, `y` `[batch, cout, h', w']` (overwritten). `act` is ReLU
+/// when `relu`, else the identity.
+pub fn forward(s: &ConvShape, x: &[f32], weight: &[f32], bias: &[f32], relu: bool, y: &mut [f32]) {
+    assert!(s.is_valid(), "conv shape {s:?} has an empty output");
+    assert_eq!(x.len(), s.batch * s.in_len(), "conv input length");
+    assert_eq!(weight.len(), s.cout * s.kdim(), "conv weight length");
+    assert_eq!(bias.len(), s.cout, "conv bias length");
+    assert_eq!(y.len(), s.batch * s.out_len(), "conv output length");
+    let (kd, p, o) = (s.kdim(), s.out_pixels(), s.cout);
+    let chunk = s.chunk();
+    let ranges = thread_ranges(s.batch);
+    // Hand each thread the output rows of its range.
+    let mut parts: Vec<(usize, usize, &mut [f32])> = Vec::with_capacity(ranges.len());
+    let mut rest = y;
+    for &(a, b) in &ranges {
+        let (head, tail) = rest.split_at_mut((b - a) * s.out_len());
+        parts.push((a, b, head));
+        rest = tail;
+    }
+    parts.into_par_iter().for_each(|(a, b, ypart)| {
+        let mut cols = vec![0f32; kd * chunk.min(b - a) * p];
+        let mut out = vec![0f32; o * chunk.min(b - a) * p];
+        let mut i0 = a;
+        while i0 < b {
+            let n = chunk.min(b - i0);
+            let nc = n * p;
+            let cols = &mut cols[..kd * nc];
+            let out = &mut out[..o * nc];
+            im2col(s, &x[i0 * s.in_len()..(i0 + n) * s.in_len()], n, cols);
+            matmul(o, nc, kd, out, nc, false, weight, (kd, 1), cols, (nc, 1));
+            // Scatter [cout, n·P] into NCHW with bias (and ReLU).
+            for i in 0..n {
+                let ys = &mut ypart[(i0 - a + i) * s.out_len()..][..s.out_len()];
+                for (oc, &bv) in bias.iter().enumerate() {
+                    let src = &out[oc * nc + i * p..][..p];
+                    let dst = &mut ys[oc * p..][..p];
+                    if relu {
+                        for (d, &v) in dst.iter_mut().zip(src) {
+                            *d = (v + bv).max(0.0);
+                        }
+                    } else {
+                        for (d, &v) in dst.iter_mut().zip(src) {
+                            *d = v + bv;
+                        }
+                    }
+                }
+            }
+            i0 += n;
+        }
+    });
+}
+
+/// The gradients of [`forward`] that were asked for.
+#[derive(Debug, Default)]
+pub struct Grads {
+    /// `[batch, cin, h, w]`, when asked.
+    pub x: Option<Vec<f32>>,
+    /// `[cout, cin, k, k]`, when asked.
+    pub weight: Option<Vec<f32>>,
+    /// `[cout]`, when asked.
+    pub bias: Option<Vec<f32>>,
+}
+
+/// Which gradients [`backward`] computes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Wanted {
+    /// The input gradient.
+    pub x: bool,
+    /// The weight gradient.
+    pub weight: bool,
+    /// The bias gradient.
+    pub bias: bool,
+}
+
+/// Backward of [`forward`]: from the output gradient `dy` (and, when `relu`, the forward's output
+/// `y` for the ReLU mask `y > 0`), the input, weight and bias gradients that `want` asks for.
+#[allow(clippy::too_many_arguments)]
+pub fn backward(
+    s: &ConvShape,
+    x: &[f32],
+    weight: &[f32],
+    y: Option<&[f32]>,
+    dy: &[f32],
+    relu: bool,
+    want: Wanted,
+) -> Grads {
+    assert!(s.is_valid(), "conv shape {s:?} has an empty output");
+    assert_eq!(x.len(), s.batch * s.in_len(), "conv input length");
+    assert_eq!(weight.len(), s.cout * s.kdim(), "conv weight length");
+    assert_eq!(dy.len(), s.batch * s.out_len(), "conv output-gradient length");
+    let mask = if relu {
+        let y = y.expect("the ReLU mask needs the forward's output");
+        assert_eq!(y.len(), dy.len(), "conv output length");
+        Some(y)
+    } else {
+        None
+    };
+    let (kd, p, o) = (s.kdim(), s.out_pixels(), s.cout);
+    let chunk = s.chunk();
+    let ranges = thread_ranges(s.batch);
+    let mut dx = want.x.then(|| vec![0f32; x.len()]);
+    // Each thread's slice of dx.
+    let mut dx_parts: Vec<Option<&mut [f32]>> = Vec::with_capacity(ranges.len());
+    match dx.as_mut() {
+        Some(d) => {
+            let mut rest = d.as_mut_slice();
+            for &(a, b) in &ranges {
+                let (head, tail) = rest.split_at_mut((b - a) * s.in_len());
+                dx_parts.push(Some(head));
+                rest = tail;
+            }
+        }
+        None => dx_parts.extend(ranges.iter().map(|_| None)),
+    }
+    let partials: Vec<(Option<Vec<f32>>, Option<Vec<f32>>)> = ranges
+        .par_iter()
+        .zip(dx_parts.into_par_iter())
+        .map(|(&(a, b), mut dx_part)| {
+            let mut dw = want.weight.then(|| vec![0f32; o * kd]);
+            let mut db = want.bias.then(|| vec![0f32; o]);
+            let need_cols = want.weight || want.x;
+            let cap = chunk.min(b - a) * p;
+            let mut cols = if need_cols { vec![0f32; kd * cap] } else { Vec::new() };
+            let mut dz = vec![0f32; o * cap];
+            let mut first = true;
+            let mut i0 = a;
+            while i0 < b {
+                let n = chunk.min(b - i0);
+                let nc = n * p;
+                let dz = &mut dz[..o * nc];
+                // Gather dy (masked by ReLU) into [cout, n·P]; sum the bias gradient.
+                for i in 0..n {
+                    let base = (i0 + i) * s.out_len();
+                    for oc in 0..o {
+                        let src = &dy[base + oc * p..][..p];
+                        let dst = &mut dz[oc * nc + i * p..][..p];
+                        match mask {
+                            Some(y) => {
+                                let ys = &y[base + oc * p..][..p];
+                                for ((d, &g), &yv) in dst.iter_mut().zip(src).zip(ys) {
+                                    *d = if yv > 0.0 { g } else { 0.0 };
+                                }
+                            }
+                            None => dst.copy_from_slice(src),
+                        }
+                        if let Some(db) = db.as_mut() {
+                            db[oc] += dst.iter().sum::<f32>();
+                        }
+                    }
+                }
+                if let Some(dw) = dw.as_mut() {
+                    let cols = &mut cols[..kd * nc];
+                    im2col(s, &x[i0 * s.in_len()..(i0 + n) * s.in_len()], n, cols);
+                    // dW [cout, kd] += dz [cout, nc] · colsᵀ [nc, kd]
+                    matmul(o, kd, nc, dw, kd, !first, dz, (nc, 1), cols, (1, nc));
+                }
+                if let Some(dxp) = dx_part.as_deref_mut() {
+                    let dcols = &mut cols[..kd * nc];
+                    // dcols [kd, nc] = Wᵀ [kd, cout] · dz [cout, nc]
+                    matmul(kd, nc, o, dcols, nc, false, weight, (1, kd), dz, (nc, 1));
+                    col2im(s, dcols, n, &mut dxp[(i0 - a) * s.in_len()..(i0 - a + n) * s.in_len()]);
+                }
+                first = false;
+                i0 += n;
+            }
+            (dw, db)
+        })
+        .collect();
+    // Sum the threads' partial gradients in thread order.
+    let mut grads = Grads { x: dx, weight: None, bias: None };
+    for (dw, db) in partials {
+        sum_into(&mut grads.weight, dw);
+        sum_into(&mut grads.bias, db);
+    }
+    if want.weight && grads.weight.is_none() {
+        grads.weight = Some(vec![0f32; o * kd]);
+    }
+    if want.bias && grads.bias.is_none() {
+        grads.bias = Some(vec![0f32; o]);
+    }
+    grads
+}
+
+fn sum_into(acc: &mut Option<Vec<f32>>, part: Option<Vec<f32>>) {
+    match (acc.as_mut(), part) {
+        (None, p) => *acc = p,
+        (Some(a), Some(p)) => a.iter_mut().zip(p).for_each(|(a, p)| *a += p),
+        (Some(_), None) => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Direct (seven-loop) convolution, the reference for the GEMM kernels.
+    fn naive(s: &ConvShape, x: &[f32], w: &[f32], b: &[f32]) -> Vec<f32> {
+        let (ho, wo) = (s.out_h(), s.out_w());
+        let mut y = vec![0f32; s.batch * s.cout * ho * wo];
+        for n in 0..s.batch {
+            for o in 0..s.cout {
+                for oy in 0..ho {
+                    for ox in 0..wo {
+                        let mut acc = b[o] as f64;
+                        for c in 0..s.cin {
+                            for ky in 0..s.k {
+                                for kx in 0..s.k {
+                                    let (iy, ix) = ((oy + ky) as isize - s.pad as isize, (ox + kx) as isize - s.pad as isize);
+                                    if iy < 0 || ix < 0 || iy >= s.h as isize || ix >= s.w as isize {
+                                        continue;
+                                    }
+                                    let xv = x[((n * s.cin + c) * s.h + iy as usize) * s.w + ix as usize] as f64;
+                                    acc += xv * w[((o * s.cin + c) * s.k + ky) * s.k + kx] as f64;
+                                }
+                            }
+                        }
+                        y[((n * s.cout + o) * ho + oy) * wo + ox] = acc as f32;
+                    }
+                }
+            }
+        }
+        y
+    }
+
+    fn values(n: usize, seed: u32) -> Vec<f32> {
+        let mut state = seed.wrapping_mul(2_654_435_761).wrapping_add(1);
+        (0..n)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 17;
+                state ^= state << 5;
+                (state as f32 / u32::MAX as f32) * 2.0 - 1.0
+            })
+            .collect()
+    }
+
+    #[test]
+    fn forward_matches_the_direct_convolution_with_padding_and_odd_sizes() {
+        for &(batch, cin, h, w, cout, k, pad) in
+            &[(3, 5, 7, 5, 6, 3, 1), (2, 4, 6, 6, 3, 3, 0), (1, 3, 1, 1, 4, 3, 1), (4, 7, 3, 3, 5, 1, 0), (2, 2, 3, 4, 3, 3, 0)]
+        {
+            let s = ConvShape { batch, cin, h, w, cout, k, pad };
+            let x = values(batch * cin * h * w, 1);
+            let wt = values(cout * cin * k * k, 2);
+            let b = values(cout, 3);
+            let want = naive(&s, &x, &wt, &b);
+            let mut y = vec![f32::NAN; want.len()];
+            forward(&s, &x, &wt, &b, false, &mut y);
+            for (a, e) in y.iter().zip(&want) {
+                assert!((a - e).abs() <= 1e-5 * (1.0 + e.abs()), "{s:?}: {a} vs {e}");
+            }
+            forward(&s, &x, &wt, &b, true, &mut y);
+            for (a, e) in y.iter().zip(&want) {
+                assert!((a - e.max(0.0)).abs() <= 1e-5 * (1.0 + e.abs()), "{s:?} relu: {a} vs {e}");
+            }
+        }
+    }
+
+    #[test]
+    fn im2col_and_col2im_are_adjoint() {
+        // <im2col(x), c> = <x, col2im(c)> for random x and c.
+        let s = ConvShape { batch: 2, cin: 3, h: 5, w: 4, cout: 1, k: 3, pad: 1 };
+        let x = values(2 * 3 * 5 * 4, 4);
+        let n = s.kdim() * 2 * s.out_pixels();
+        let c = values(n, 5);
+        let mut cols = vec![0f32; n];
+        im2col(&s, &x, 2, &mut cols);
+        let mut back = vec![0f32; x.len()];
+        col2im(&s, &c, 2, &mut back);
+        let lhs: f64 = cols.iter().zip(&c).map(|(a, b)| (*a as f64) * (*b as f64)).sum();
+        let rhs: f64 = x.iter().zip(&back).map(|(a, b)| (*a as f64) * (*b as f64)).sum();
+        assert!((lhs - rhs).abs() < 1e-4 * (1.0 + lhs.abs()), "{lhs} vs {rhs}");
+    }
+}

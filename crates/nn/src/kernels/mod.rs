@@ -1,0 +1,224 @@
+//! Our own convolution for the CPU backend (`flex`): a custom op of burn's backend-extension
+//! mechanism with a hand-written backward, used by [`crate::layers::EquivariantConv`] and
+//! [`crate::plain::Conv`] through [`crate::layers::conv2d_stride1`].
+//!
+//! - [`gemm_conv`]: forward, input gradient and weight gradient as large GEMMs (im2col, the
+//!   `gemm` crate, bias and ReLU fused), parallel over the batch, deterministic at a given thread
+//!   count.
+//! - [`conv2d_fused`]: `act(conv2d(x, weight) + bias)` on tensors. On `flex` (with or without
+//!   autodiff) it runs the kernels above; its backward computes only the gradients the autodiff
+//!   graph asks for (none for an input that is not tracked, as the first layer's observation).
+//!   On other backends it is burn's `conv2d` followed by `relu`.
+//!
+//! - [`pool`], [`max_pool2x2`]: 2×2 max-pooling, forward with the argmax and a backward that
+//!   routes the gradient to it (burn's generic pooling was a seventh of an update).
+//!
+//! Limitations: stride 1, square kernels, `f32` only (the default float type).
+
+pub mod gemm_conv;
+pub mod pool;
+
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::flex::FlexTensor;
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex};
+use burn::tensor::module::conv2d;
+use burn::tensor::ops::ConvOptions;
+use burn::backend::TensorMetadata;
+use burn::tensor::{DType, Device, Shape, Tensor, TensorData};
+use gemm_conv::{ConvShape, Wanted};
+
+/// The custom op, routed by burn's dispatch to `Flex` or `Autodiff<Flex>`.
+#[backend_extension(Flex, Autodiff)]
+pub trait ConvKernelOps: Backend {
+    /// `act(conv2d(x, weight) + bias)`, stride 1, zero padding `padding`; `act` is ReLU when
+    /// `relu`. `x` `[B, C, H, W]`, `weight` `[O, C, k, k]`, `bias` `[O]`.
+    fn fused_conv2d(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        padding: usize,
+        relu: bool,
+    ) -> FloatTensor<Self>;
+
+    /// 2×2 max-pooling with stride 2 of `x` `[B, C, H, W]` → `[B, C, H/2, W/2]`.
+    fn max_pool2x2(x: FloatTensor<Self>) -> FloatTensor<Self>;
+}
+
+/// The contiguous `f32` values of a flex tensor (a copy only when it is a strided view).
+fn values(t: &FlexTensor) -> std::borrow::Cow<'_, [f32]> {
+    match t.as_slice::<f32>() {
+        Some(s) => std::borrow::Cow::Borrowed(s),
+        None => std::borrow::Cow::Owned(t.to_contiguous().as_slice::<f32>().expect("contiguous f32").to_vec()),
+    }
+}
+
+fn flex_tensor(data: Vec<f32>, shape: Vec<usize>) -> FlexTensor {
+    FlexTensor::from_data(TensorData::new(data, shape))
+}
+
+/// The convolution shape of `x` and `weight`, checked.
+fn conv_shape(x: &FlexTensor, weight: &FlexTensor, padding: usize) -> ConvShape {
+    assert_eq!(x.dtype(), DType::F32, "fused_conv2d: input dtype {:?}, the kernels take f32", x.dtype());
+    assert_eq!(weight.dtype(), DType::F32, "fused_conv2d: weight dtype {:?}, the kernels take f32", weight.dtype());
+    let xs = dims4(&x.shape());
+    let ws = dims4(&weight.shape());
+    assert_eq!(xs[1], ws[1], "fused_conv2d: input has {} channels, the kernel expects {}", xs[1], ws[1]);
+    assert_eq!(ws[2], ws[3], "fused_conv2d: kernel {}×{} is not square", ws[2], ws[3]);
+    let s = ConvShape { batch: xs[0], cin: xs[1], h: xs[2], w: xs[3], cout: ws[0], k: ws[2], pad: padding };
+    assert!(s.is_valid(), "fused_conv2d: {}×{} input, kernel {}, padding {padding}: empty output", s.h, s.w, s.k);
+    s
+}
+
+fn dims4(shape: &Shape) -> [usize; 4] {
+    let d: Vec<usize> = shape.iter().copied().collect();
+    d.try_into().unwrap_or_else(|d: Vec<usize>| panic!("fused_conv2d: expected a 4-D tensor, got shape {d:?}"))
+}
+
+fn flex_forward(x: &FlexTensor, weight: &FlexTensor, bias: &FlexTensor, padding: usize, relu: bool) -> FlexTensor {
+    let s = conv_shape(x, weight, padding);
+    let mut y = vec![0f32; s.batch * s.cout * s.out_h() * s.out_w()];
+    gemm_conv::forward(&s, &values(x), &values(weight), &values(bias), relu, &mut y);
+    flex_tensor(y, vec![s.batch, s.cout, s.out_h(), s.out_w()])
+}
+
+/// The pooled tensor and the argmax of each output.
+fn flex_pool(x: &FlexTensor) -> (FlexTensor, Vec<u8>) {
+    assert_eq!(x.dtype(), DType::F32, "max_pool2x2: input dtype {:?}, the kernels take f32", x.dtype());
+    let [b, c, h, w] = dims4(&x.shape());
+    let (y, idx) = pool::forward(&values(x), b * c, h, w);
+    let (ho, wo) = pool::out_size(h, w);
+    (flex_tensor(y, vec![b, c, ho, wo]), idx)
+}
+
+impl ConvKernelOps for Flex {
+    fn fused_conv2d(x: FlexTensor, weight: FlexTensor, bias: FlexTensor, padding: usize, relu: bool) -> FlexTensor {
+        flex_forward(&x, &weight, &bias, padding, relu)
+    }
+
+    fn max_pool2x2(x: FlexTensor) -> FlexTensor {
+        flex_pool(&x).0
+    }
+}
+
+#[derive(Debug)]
+struct MaxPoolBackward;
+
+impl Backward<Flex, 1> for MaxPoolBackward {
+    /// The argmax of each output and the input's shape.
+    type State = (std::sync::Arc<Vec<u8>>, [usize; 4]);
+
+    fn backward(self, ops: Ops<Self::State, 1>, grads: &mut Gradients, _checkpointer: &mut Checkpointer) {
+        let [node_x] = ops.parents;
+        let dy = grads.consume::<Flex>(&ops.node);
+        let (idx, [b, c, h, w]) = ops.state;
+        if let Some(node) = node_x {
+            let dx = pool::backward(&values(&dy), &idx, b * c, h, w);
+            grads.register::<Flex>(node.id, flex_tensor(dx, vec![b, c, h, w]));
+        }
+    }
+}
+
+#[derive(Debug)]
+struct FusedConvBackward;
+
+/// What the backward step keeps: the input, the weight, the output (for the ReLU mask), the
+/// padding and whether ReLU was applied.
+type FusedState = (FlexTensor, FlexTensor, Option<FlexTensor>, usize, bool);
+
+impl Backward<Flex, 3> for FusedConvBackward {
+    type State = FusedState;
+
+    fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _checkpointer: &mut Checkpointer) {
+        let [node_x, node_w, node_b] = ops.parents;
+        let dy = grads.consume::<Flex>(&ops.node);
+        let (x, weight, y, padding, relu) = ops.state;
+        let want = Wanted { x: node_x.is_some(), weight: node_w.is_some(), bias: node_b.is_some() };
+        if !(want.x || want.weight || want.bias) {
+            return;
+        }
+        let s = conv_shape(&x, &weight, padding);
+        let y_vals = y.as_ref().map(values);
+        let g = gemm_conv::backward(&s, &values(&x), &values(&weight), y_vals.as_deref(), &values(&dy), relu, want);
+        if let (Some(node), Some(dx)) = (node_x, g.x) {
+            grads.register::<Flex>(node.id, flex_tensor(dx, vec![s.batch, s.cin, s.h, s.w]));
+        }
+        if let (Some(node), Some(dw)) = (node_w, g.weight) {
+            grads.register::<Flex>(node.id, flex_tensor(dw, vec![s.cout, s.cin, s.k, s.k]));
+        }
+        if let (Some(node), Some(db)) = (node_b, g.bias) {
+            grads.register::<Flex>(node.id, flex_tensor(db, vec![s.cout]));
+        }
+    }
+}
+
+impl<C: CheckpointStrategy> ConvKernelOps for Autodiff<Flex, C> {
+    fn fused_conv2d(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        padding: usize,
+        relu: bool,
+    ) -> FloatTensor<Self> {
+        match FusedConvBackward.prepare::<C>([x.node(), weight.node(), bias.node()]).compute_bound().stateful() {
+            OpsKind::Tracked(prep) => {
+                let (xp, wp, bp) = (x.into_primitive(), weight.into_primitive(), bias.into_primitive());
+                let y = flex_forward(&xp, &wp, &bp, padding, relu);
+                let saved = relu.then(|| y.clone());
+                prep.finish((xp, wp, saved, padding, relu), y)
+            }
+            OpsKind::UnTracked(prep) => {
+                prep.finish(flex_forward(x.primitive(), weight.primitive(), bias.primitive(), padding, relu))
+            }
+        }
+    }
+
+    fn max_pool2x2(x: FloatTensor<Self>) -> FloatTensor<Self> {
+        match MaxPoolBackward.prepare::<C>([x.node()]).compute_bound().stateful() {
+            OpsKind::Tracked(prep) => {
+                let shape = dims4(&x.primitive().shape());
+                let (y, idx) = flex_pool(x.primitive());
+                prep.finish((std::sync::Arc::new(idx), shape), y)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(flex_pool(x.primitive()).0),
+        }
+    }
+}
+
+/// Whether tensors on `device` run our kernels (the `flex` CPU backend, with or without
+/// autodiff).
+pub fn runs_kernels(device: &Device) -> bool {
+    device.clone().without_autodiff() == Device::flex()
+}
+
+/// 2×2 max-pooling with stride 2 (`[B, C, H, W] → [B, C, H/2, W/2]`): our kernel on `flex`,
+/// burn's `max_pool2d` elsewhere.
+pub fn max_pool2x2(x: Tensor<4>) -> Tensor<4> {
+    if runs_kernels(&x.device()) {
+        Tensor::from_dispatch(<Dispatch as ConvKernelOps>::max_pool2x2(x.into_dispatch()))
+    } else {
+        burn::tensor::module::max_pool2d(x, burn::tensor::ops::MaxPoolOptions::new([2, 2]))
+    }
+}
+
+/// `act(conv2d(x, weight) + bias)`, stride 1, zero padding `padding`, `act` = ReLU when `relu`:
+/// our kernels on `flex`, burn's `conv2d` (+ `relu`) elsewhere. `x` `[B, C, H, W]`, `weight`
+/// `[O, C, k, k]` (square), `bias` `[O]`.
+pub fn conv2d_fused(x: Tensor<4>, weight: Tensor<4>, bias: Tensor<1>, padding: usize, relu: bool) -> Tensor<4> {
+    if runs_kernels(&x.device()) {
+        let out = <Dispatch as ConvKernelOps>::fused_conv2d(
+            x.into_dispatch(),
+            weight.into_dispatch(),
+            bias.into_dispatch(),
+            padding,
+            relu,
+        );
+        Tensor::from_dispatch(out)
+    } else {
+        let y = conv2d(x, weight, Some(bias), ConvOptions::new([1, 1], [padding, padding], [1, 1], 1));
+        if relu { burn::tensor::activation::relu(y) } else { y }
+    }
+}
