@@ -8,7 +8,7 @@
 //! ratio, the FLOPs of one update (the GEMMs of our convolution kernels, counted from the layer
 //! shapes: forward, and the input and weight gradients that the update needs), our GFLOP/s and its
 //! fraction of the sgemm peak at that thread count (a single-thread 1024³ sgemm on the `gemm`
-//! crate, measured at the start of the run, times the threads), and the batch-1 greedy action time;
+//! crate, best of 10 at the start of the run, times the threads), and the batch-1 greedy action time;
 //! then one `csv,` line per case and the peak RSS.
 //!
 //! `cargo bench -p equiarm_sac --bench update -- [--reps 5] [--config reduced16|paper|all]
@@ -106,15 +106,15 @@ fn batch(b: usize, s: usize, seed: u64) -> Batch {
     }
 }
 
-/// Single-thread sgemm GFLOP/s of the `gemm` crate on 1024³ (median of 5): this CPU's fp32 peak
-/// as the convolution kernels can reach it.
+/// Single-thread sgemm GFLOP/s of the `gemm` crate on 1024³ (the best of 10, after a warm-up):
+/// this CPU's fp32 peak as the convolution kernels can reach it.
 fn sgemm_peak() -> f64 {
     let n = 1024;
     let a: Vec<f32> = (0..n * n).map(|i| (i % 13) as f32 * 0.01).collect();
     let b: Vec<f32> = (0..n * n).map(|i| (i % 7) as f32 * 0.01).collect();
     let mut c = vec![0f32; n * n];
     let mut times = Vec::new();
-    for _ in 0..6 {
+    for _ in 0..11 {
         let t = Instant::now();
         // SAFETY: a, b and c are n×n row-major buffers; the strides address only their elements.
         unsafe {
@@ -125,7 +125,8 @@ fn sgemm_peak() -> f64 {
         }
         times.push(t.elapsed().as_secs_f64());
     }
-    2.0 * (n * n * n) as f64 / median(times[1..].to_vec()) / 1e9
+    let best = times[1..].iter().copied().fold(f64::INFINITY, f64::min);
+    2.0 * (n * n * n) as f64 / best / 1e9
 }
 
 #[derive(Debug, Default)]

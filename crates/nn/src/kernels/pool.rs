@@ -1,6 +1,7 @@
 //! 2×2 max-pooling with stride 2 on `f32` NCHW slices, forward (with the position of each
 //! maximum) and backward, parallel over the channel planes. Odd sizes drop the last row or column,
-//! as burn's `max_pool2d` does; ties go to the first position in row-major order.
+//! as burn's `max_pool2d` does; ties go to the first position in row-major order. NaNs are not
+//! propagated (the learner stops on non-finite losses before they could matter).
 
 use rayon::prelude::*;
 
@@ -32,17 +33,14 @@ pub fn forward(x: &[f32], planes: usize, h: usize, w: usize) -> (Vec<f32>, Vec<u
                 for oy in 0..ho {
                     let r0 = &plane[2 * oy * w..][..w];
                     let r1 = &plane[(2 * oy + 1) * w..][..w];
-                    for ox in 0..wo {
-                        let c = [r0[2 * ox], r0[2 * ox + 1], r1[2 * ox], r1[2 * ox + 1]];
-                        let mut best = 0;
-                        for j in 1..4 {
-                            // NaN propagates: a NaN candidate replaces a number.
-                            if c[j] > c[best] || (c[j].is_nan() && !c[best].is_nan()) {
-                                best = j;
-                            }
-                        }
-                        yp[oy * wo + ox] = c[best];
-                        ip[oy * wo + ox] = best as u8;
+                    let (yr, ir) = (&mut yp[oy * wo..][..wo], &mut ip[oy * wo..][..wo]);
+                    for (ox, (yv, iv)) in yr.iter_mut().zip(ir.iter_mut()).enumerate() {
+                        let (a, b) = (r0[2 * ox], r0[2 * ox + 1]);
+                        let (c, d) = (r1[2 * ox], r1[2 * ox + 1]);
+                        // Strict comparisons: a tie keeps the earlier position.
+                        let (top, ti) = if b > a { (b, 1u8) } else { (a, 0u8) };
+                        let (bottom, bi) = if d > c { (d, 3u8) } else { (c, 2u8) };
+                        (*yv, *iv) = if bottom > top { (bottom, bi) } else { (top, ti) };
                     }
                 }
             }
