@@ -6,13 +6,13 @@
 mod common;
 
 use common::{device, randn, rel_err, values};
+use equiarm_nn::burn::tensor::Tensor;
 use equiarm_nn::burn::tensor::module::conv2d;
 use equiarm_nn::burn::tensor::ops::ConvOptions;
-use equiarm_nn::burn::tensor::Tensor;
 use equiarm_nn::group::Group;
 use equiarm_nn::init::Init;
 use equiarm_nn::kernels::conv2d_fused;
-use equiarm_nn::layers::{set_conv_algo, ConvAlgo, EquivariantConv};
+use equiarm_nn::layers::{ConvAlgo, EquivariantConv, set_conv_algo};
 use equiarm_nn::plain::Conv;
 use equiarm_nn::repr::FieldType;
 use std::sync::Mutex;

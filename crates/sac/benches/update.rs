@@ -80,7 +80,9 @@ fn median(mut v: Vec<f64>) -> f64 {
 fn peak_rss_mb() -> f64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
-        .and_then(|s| s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok()))
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        })
         .map(|kb| kb / 1024.0)
         .unwrap_or(f64::NAN)
 }
@@ -119,8 +121,25 @@ fn sgemm_peak() -> f64 {
         // SAFETY: a, b and c are n×n row-major buffers; the strides address only their elements.
         unsafe {
             gemm::gemm(
-                n, n, n, c.as_mut_ptr(), 1, n as isize, false, a.as_ptr(), 1, n as isize, b.as_ptr(), 1,
-                n as isize, 1.0f32, 1.0f32, false, false, false, gemm::Parallelism::None,
+                n,
+                n,
+                n,
+                c.as_mut_ptr(),
+                1,
+                n as isize,
+                false,
+                a.as_ptr(),
+                1,
+                n as isize,
+                b.as_ptr(),
+                1,
+                n as isize,
+                1.0f32,
+                1.0f32,
+                false,
+                false,
+                false,
+                gemm::Parallelism::None,
             );
         }
         times.push(t.elapsed().as_secs_f64());
@@ -146,7 +165,11 @@ fn peer(model: ModelKind, preset: &str, threads: u32, reps: u32) -> Option<Peer>
     let out = match out {
         Ok(o) if o.status.success() => o,
         Ok(o) => {
-            eprintln!("peer failed ({}): {}", o.status, String::from_utf8_lossy(&o.stderr).lines().last().unwrap_or(""));
+            eprintln!(
+                "peer failed ({}): {}",
+                o.status,
+                String::from_utf8_lossy(&o.stderr).lines().last().unwrap_or("")
+            );
             return None;
         }
         Err(e) => {
@@ -178,9 +201,7 @@ fn main() {
     });
     let peak = sgemm_peak();
     println!("device {} ({device:?}); sgemm peak (gemm crate, 1 thread, 1024³): {peak:.1} GFLOP/s", args.device);
-    println!(
-        "model  config    thr batch  px | update s  peer s  ratio | GFLOP  GFLOP/s  of peak | act b1 ms  peer ms"
-    );
+    println!("model  config    thr batch  px | update s  peer s  ratio | GFLOP  GFLOP/s  of peak | act b1 ms  peer ms");
     let mut csv = Vec::new();
     for preset_name in &presets {
         for &model in &models {
@@ -260,7 +281,9 @@ fn main() {
             }
         }
     }
-    println!("csv,model,config,threads,batch,px,update_s,peer_update_s,ratio,gflop,gflops,of_peak,act_b1_s,peer_act_b1_s");
+    println!(
+        "csv,model,config,threads,batch,px,update_s,peer_update_s,ratio,gflop,gflops,of_peak,act_b1_s,peer_act_b1_s"
+    );
     for line in csv {
         println!("{line}");
     }

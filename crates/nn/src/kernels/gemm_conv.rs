@@ -9,7 +9,7 @@
 //! output gradient. Partial weight and bias gradients are summed over the threads in thread order,
 //! so results are bit-identical from run to run at a given thread count.
 
-use gemm::{gemm, Parallelism};
+use gemm::{Parallelism, gemm};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -50,6 +50,35 @@ pub struct ConvShape {
 
 /// Largest im2col chunk, in floats (16 MiB): bounds the scratch memory per thread.
 const CHUNK_FLOATS: usize = 4 << 20;
+
+/// Output pixels per sample from which the forward pass runs one GEMM per sample straight into
+/// the NCHW output (no scatter pass); smaller maps are batched into one GEMM per chunk.
+const DIRECT_PIXELS: usize = 256;
+
+thread_local! {
+    /// Per-thread scratch buffers (im2col matrix, GEMM output), kept between calls so that each
+    /// convolution does not allocate, zero and page-fault tens of megabytes afresh.
+    static SCRATCH: std::cell::RefCell<(Vec<f32>, Vec<f32>)> = const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
+}
+
+/// Runs `f` on two scratch slices of `a` and `b` floats (contents unspecified: `f` must write
+/// before it reads).
+fn with_scratch<R>(a: usize, b: usize, f: impl FnOnce(&mut [f32], &mut [f32]) -> R) -> R {
+    SCRATCH.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut bufs) => {
+            let (x, y) = &mut *bufs;
+            if x.len() < a {
+                x.resize(a, 0.0);
+            }
+            if y.len() < b {
+                y.resize(b, 0.0);
+            }
+            f(&mut x[..a], &mut y[..b])
+        }
+        // Re-entered on this thread (not done by these kernels): fresh buffers.
+        Err(_) => f(&mut vec![0f32; a], &mut vec![0f32; b]),
+    })
+}
 
 impl ConvShape {
     /// Output height `h + 2·pad − k + 1`.
@@ -116,19 +145,27 @@ fn im2col(s: &ConvShape, x: &[f32], n: usize, cols: &mut [f32]) {
                 // Output columns ox whose input column ix = ox + kx − pad lies in [0, w).
                 let lo = pad.saturating_sub(kx).min(wo);
                 let hi = (w + pad).saturating_sub(kx).min(wo).max(lo);
+                // Output rows oy whose input row iy = oy + ky − pad lies in [0, h).
+                let (ylo, yhi) = (pad.saturating_sub(ky).min(ho), (h + pad).saturating_sub(ky).min(ho));
+                let yhi = yhi.max(ylo);
+                // Where the copied part starts in the input row (used only when hi > lo).
+                let start = (lo + kx).saturating_sub(pad);
                 for i in 0..n {
                     let plane = &x[(i * s.cin + c) * h * w..][..h * w];
-                    for oy in 0..ho {
-                        let dst = &mut row[(i * ho + oy) * wo..][..wo];
-                        let iy = oy + ky;
-                        if iy < pad || iy >= h + pad {
-                            dst.fill(0.0);
-                            continue;
-                        }
-                        let src = &plane[(iy - pad) * w..][..w];
+                    let rows = &mut row[i * ho * wo..][..ho * wo];
+                    rows[..ylo * wo].fill(0.0);
+                    rows[yhi * wo..].fill(0.0);
+                    if lo == 0 && hi == wo && wo == w {
+                        // Whole input rows, contiguous on both sides: one copy.
+                        let src = &plane[(ylo + ky - pad) * w..(yhi + ky - pad) * w];
+                        rows[ylo * wo..yhi * wo].copy_from_slice(src);
+                        continue;
+                    }
+                    for oy in ylo..yhi {
+                        let dst = &mut rows[oy * wo..][..wo];
+                        let src = &plane[(oy + ky - pad) * w..][..w];
                         dst[..lo].fill(0.0);
                         dst[hi..].fill(0.0);
-                        let start = lo + kx - pad;
                         dst[lo..hi].copy_from_slice(&src[start..start + (hi - lo)]);
                     }
                 }
@@ -236,7 +273,8 @@ pub fn forward(s: &ConvShape, x: &[f32], weight: &[f32], bias: &[f32], relu: boo
     assert_eq!(bias.len(), s.cout, "conv bias length");
     assert_eq!(y.len(), s.batch * s.out_len(), "conv output length");
     let (kd, p, o) = (s.kdim(), s.out_pixels(), s.cout);
-    let chunk = s.chunk();
+    let direct = p >= DIRECT_PIXELS;
+    let chunk = if direct { 1 } else { s.chunk() };
     let ranges = thread_ranges(s.batch);
     // Hand each thread the output rows of its range.
     let mut parts: Vec<(usize, usize, &mut [f32])> = Vec::with_capacity(ranges.len());
@@ -246,36 +284,45 @@ pub fn forward(s: &ConvShape, x: &[f32], weight: &[f32], bias: &[f32], relu: boo
         parts.push((a, b, head));
         rest = tail;
     }
+    let act = |dst: &mut [f32], bv: f32| {
+        if relu {
+            dst.iter_mut().for_each(|d| *d = (*d + bv).max(0.0));
+        } else {
+            dst.iter_mut().for_each(|d| *d += bv);
+        }
+    };
     parts.into_par_iter().for_each(|(a, b, ypart)| {
-        let mut cols = vec![0f32; kd * chunk.min(b - a) * p];
-        let mut out = vec![0f32; o * chunk.min(b - a) * p];
-        let mut i0 = a;
-        while i0 < b {
-            let n = chunk.min(b - i0);
-            let nc = n * p;
-            let cols = &mut cols[..kd * nc];
-            let out = &mut out[..o * nc];
-            im2col(s, &x[i0 * s.in_len()..(i0 + n) * s.in_len()], n, cols);
-            matmul(o, nc, kd, out, nc, false, weight, (kd, 1), cols, (nc, 1));
-            // Scatter [cout, n·P] into NCHW with bias (and ReLU).
-            for i in 0..n {
-                let ys = &mut ypart[(i0 - a + i) * s.out_len()..][..s.out_len()];
-                for (oc, &bv) in bias.iter().enumerate() {
-                    let src = &out[oc * nc + i * p..][..p];
-                    let dst = &mut ys[oc * p..][..p];
-                    if relu {
-                        for (d, &v) in dst.iter_mut().zip(src) {
-                            *d = (v + bv).max(0.0);
-                        }
-                    } else {
-                        for (d, &v) in dst.iter_mut().zip(src) {
-                            *d = v + bv;
+        let cap = chunk.min(b - a) * p;
+        with_scratch(kd * cap, if direct { 0 } else { o * cap }, |cols, out| {
+            let mut i0 = a;
+            while i0 < b {
+                let n = chunk.min(b - i0);
+                let nc = n * p;
+                let cols = &mut cols[..kd * nc];
+                im2col(s, &x[i0 * s.in_len()..(i0 + n) * s.in_len()], n, cols);
+                if direct {
+                    // One sample: [cout, P] is its NCHW output already.
+                    let ys = &mut ypart[(i0 - a) * s.out_len()..][..s.out_len()];
+                    matmul(o, p, kd, ys, p, false, weight, (kd, 1), cols, (p, 1));
+                    for (oc, &bv) in bias.iter().enumerate() {
+                        act(&mut ys[oc * p..][..p], bv);
+                    }
+                } else {
+                    let out = &mut out[..o * nc];
+                    matmul(o, nc, kd, out, nc, false, weight, (kd, 1), cols, (nc, 1));
+                    // Scatter [cout, n·P] into NCHW with bias (and ReLU).
+                    for i in 0..n {
+                        let ys = &mut ypart[(i0 - a + i) * s.out_len()..][..s.out_len()];
+                        for (oc, &bv) in bias.iter().enumerate() {
+                            let dst = &mut ys[oc * p..][..p];
+                            dst.copy_from_slice(&out[oc * nc + i * p..][..p]);
+                            act(dst, bv);
                         }
                     }
                 }
+                i0 += n;
             }
-            i0 += n;
-        }
+        })
     });
 }
 
@@ -349,49 +396,49 @@ pub fn backward(
             let mut db = want.bias.then(|| vec![0f32; o]);
             let need_cols = want.weight || want.x;
             let cap = chunk.min(b - a) * p;
-            let mut cols = if need_cols { vec![0f32; kd * cap] } else { Vec::new() };
-            let mut dz = vec![0f32; o * cap];
-            let mut first = true;
-            let mut i0 = a;
-            while i0 < b {
-                let n = chunk.min(b - i0);
-                let nc = n * p;
-                let dz = &mut dz[..o * nc];
-                // Gather dy (masked by ReLU) into [cout, n·P]; sum the bias gradient.
-                for i in 0..n {
-                    let base = (i0 + i) * s.out_len();
-                    for oc in 0..o {
-                        let src = &dy[base + oc * p..][..p];
-                        let dst = &mut dz[oc * nc + i * p..][..p];
-                        match mask {
-                            Some(y) => {
-                                let ys = &y[base + oc * p..][..p];
-                                for ((d, &g), &yv) in dst.iter_mut().zip(src).zip(ys) {
-                                    *d = if yv > 0.0 { g } else { 0.0 };
+            with_scratch(if need_cols { kd * cap } else { 0 }, o * cap, |cols, dz| {
+                let mut first = true;
+                let mut i0 = a;
+                while i0 < b {
+                    let n = chunk.min(b - i0);
+                    let nc = n * p;
+                    let dz = &mut dz[..o * nc];
+                    // Gather dy (masked by ReLU) into [cout, n·P]; sum the bias gradient.
+                    for i in 0..n {
+                        let base = (i0 + i) * s.out_len();
+                        for oc in 0..o {
+                            let src = &dy[base + oc * p..][..p];
+                            let dst = &mut dz[oc * nc + i * p..][..p];
+                            match mask {
+                                Some(y) => {
+                                    let ys = &y[base + oc * p..][..p];
+                                    for ((d, &g), &yv) in dst.iter_mut().zip(src).zip(ys) {
+                                        *d = if yv > 0.0 { g } else { 0.0 };
+                                    }
                                 }
+                                None => dst.copy_from_slice(src),
                             }
-                            None => dst.copy_from_slice(src),
-                        }
-                        if let Some(db) = db.as_mut() {
-                            db[oc] += dst.iter().sum::<f32>();
+                            if let Some(db) = db.as_mut() {
+                                db[oc] += dst.iter().sum::<f32>();
+                            }
                         }
                     }
+                    if let Some(dw) = dw.as_mut() {
+                        let cols = &mut cols[..kd * nc];
+                        im2col(s, &x[i0 * s.in_len()..(i0 + n) * s.in_len()], n, cols);
+                        // dW [cout, kd] += dz [cout, nc] · colsᵀ [nc, kd]
+                        matmul(o, kd, nc, dw, kd, !first, dz, (nc, 1), cols, (1, nc));
+                    }
+                    if let Some(dxp) = dx_part.as_deref_mut() {
+                        let dcols = &mut cols[..kd * nc];
+                        // dcols [kd, nc] = Wᵀ [kd, cout] · dz [cout, nc]
+                        matmul(kd, nc, o, dcols, nc, false, weight, (1, kd), dz, (nc, 1));
+                        col2im(s, dcols, n, &mut dxp[(i0 - a) * s.in_len()..(i0 - a + n) * s.in_len()]);
+                    }
+                    first = false;
+                    i0 += n;
                 }
-                if let Some(dw) = dw.as_mut() {
-                    let cols = &mut cols[..kd * nc];
-                    im2col(s, &x[i0 * s.in_len()..(i0 + n) * s.in_len()], n, cols);
-                    // dW [cout, kd] += dz [cout, nc] · colsᵀ [nc, kd]
-                    matmul(o, kd, nc, dw, kd, !first, dz, (nc, 1), cols, (1, nc));
-                }
-                if let Some(dxp) = dx_part.as_deref_mut() {
-                    let dcols = &mut cols[..kd * nc];
-                    // dcols [kd, nc] = Wᵀ [kd, cout] · dz [cout, nc]
-                    matmul(kd, nc, o, dcols, nc, false, weight, (1, kd), dz, (nc, 1));
-                    col2im(s, dcols, n, &mut dxp[(i0 - a) * s.in_len()..(i0 - a + n) * s.in_len()]);
-                }
-                first = false;
-                i0 += n;
-            }
+            });
             (dw, db)
         })
         .collect();
@@ -434,7 +481,8 @@ mod tests {
                         for c in 0..s.cin {
                             for ky in 0..s.k {
                                 for kx in 0..s.k {
-                                    let (iy, ix) = ((oy + ky) as isize - s.pad as isize, (ox + kx) as isize - s.pad as isize);
+                                    let (iy, ix) =
+                                        ((oy + ky) as isize - s.pad as isize, (ox + kx) as isize - s.pad as isize);
                                     if iy < 0 || ix < 0 || iy >= s.h as isize || ix >= s.w as isize {
                                         continue;
                                     }
@@ -465,9 +513,13 @@ mod tests {
 
     #[test]
     fn forward_matches_the_direct_convolution_with_padding_and_odd_sizes() {
-        for &(batch, cin, h, w, cout, k, pad) in
-            &[(3, 5, 7, 5, 6, 3, 1), (2, 4, 6, 6, 3, 3, 0), (1, 3, 1, 1, 4, 3, 1), (4, 7, 3, 3, 5, 1, 0), (2, 2, 3, 4, 3, 3, 0)]
-        {
+        for &(batch, cin, h, w, cout, k, pad) in &[
+            (3, 5, 7, 5, 6, 3, 1),
+            (2, 4, 6, 6, 3, 3, 0),
+            (1, 3, 1, 1, 4, 3, 1),
+            (4, 7, 3, 3, 5, 1, 0),
+            (2, 2, 3, 4, 3, 3, 0),
+        ] {
             let s = ConvShape { batch, cin, h, w, cout, k, pad };
             let x = values(batch * cin * h * w, 1);
             let wt = values(cout * cin * k * k, 2);
