@@ -1,6 +1,7 @@
 //! Our convolution kernels ([`equiarm_nn::kernels`]) against burn's reference `conv2d` (+ `relu`):
 //! forward, input gradient, weight gradient and bias gradient within 1e-5 relative (L2) on random
-//! shapes (batch 1 and 64, channels 5–256, sizes 1–38, padding 0 and 1, odd sizes, 1×1 and 3×3),
+//! shapes (batch 1 and 64, channels 5–256, sizes 1–48, padding 0 and 1, odd sizes, 1×1 and 3×3,
+//! maps large enough to be worked on in bands of rows),
 //! also through `EquivariantConv` and `Conv`; and their results are the same from run to run.
 
 mod common;
@@ -41,6 +42,9 @@ const SHAPES: &[(usize, usize, usize, usize, usize, usize, bool)] = &[
     (2, 9, 6, 1, 3, 1, false),
     (64, 133, 128, 1, 1, 0, true),
     (5, 6, 7, 9, 1, 0, false),
+    // Large maps, worked on in bands of output rows.
+    (2, 16, 8, 48, 3, 1, true),
+    (3, 64, 8, 40, 3, 0, true),
 ];
 
 #[test]

@@ -2,12 +2,13 @@
 //! (the `gemm` crate, whose AVX-512 / AVX2 / SSE kernels are chosen at run time).
 //!
 //! Each call splits the batch into one contiguous range per rayon thread; a thread walks its range
-//! in chunks of samples small enough that their im2col matrix stays in cache-friendly bounds, and
-//! for each chunk runs one GEMM whose inner dimension is `C·k·k` (forward, input gradient) or
-//! `chunk·H'·W'` (weight gradient). Bias and ReLU are fused into the pass that scatters the
-//! GEMM's result into NCHW; the ReLU mask and the bias gradient into the pass that gathers the
-//! output gradient. Partial weight and bias gradients are summed over the threads in thread order,
-//! so results are bit-identical from run to run at a given thread count.
+//! in pieces small enough that their im2col matrix is still in cache when the GEMM packs it
+//! (several small samples, one sample, or a band of output rows of a large one), and for each piece
+//! runs one GEMM whose inner dimension is `C·k·k` (forward, input gradient) or the piece's output
+//! pixels (weight gradient, accumulated over the pieces). Bias and ReLU are fused into the pass
+//! that writes the GEMM's result into NCHW; the ReLU mask and the bias gradient into the pass that
+//! gathers the output gradient. Partial weight and bias gradients are summed over the threads in
+//! thread order, so results are bit-identical from run to run at a given thread count.
 
 use gemm::{Parallelism, gemm};
 use rayon::prelude::*;
@@ -52,9 +53,13 @@ pub struct ConvShape {
 /// the GEMM packs it (measured: 4 MiB chunks 13 % and 16 MiB chunks 20 % slower per SAC update).
 const CHUNK_FLOATS: usize = 1 << 18;
 
-/// Output pixels per sample from which the forward pass runs one GEMM per sample straight into
-/// the NCHW output (no scatter pass); smaller maps are batched into one GEMM per chunk.
+/// Output pixels per sample from which the passes work on one sample at a time (in bands of rows
+/// when it is large) and the forward GEMM writes straight into the NCHW output (no scatter pass);
+/// smaller maps are batched, several samples to one GEMM.
 const DIRECT_PIXELS: usize = 256;
+
+/// Fewest GEMM columns per piece of work: narrower GEMMs run far below the kernel's peak.
+const MIN_COLUMNS: usize = 64;
 
 thread_local! {
     /// Per-thread scratch buffers (im2col matrix, GEMM output), kept between calls so that each
@@ -119,10 +124,47 @@ impl ConvShape {
         2.0 * (self.batch * self.cout * self.out_pixels() * self.kdim()) as f64
     }
 
-    /// Samples per chunk: as many as keep the im2col matrix under [`CHUNK_FLOATS`].
-    fn chunk(&self) -> usize {
-        let per_sample = (self.kdim() * self.out_pixels()).max(1);
-        (CHUNK_FLOATS / per_sample).max(1)
+    /// The pieces of work of samples `a..b`, each one im2col matrix and one GEMM: whole samples,
+    /// several to a piece while a map has fewer than [`DIRECT_PIXELS`] pixels, or bands of output
+    /// rows of one sample, so that each piece has about [`CHUNK_FLOATS`] im2col entries but at
+    /// least [`MIN_COLUMNS`] columns.
+    fn units(&self, a: usize, b: usize) -> Vec<Unit> {
+        let (ho, wo) = (self.out_h(), self.out_w());
+        let p = ho * wo;
+        let target = (CHUNK_FLOATS / self.kdim().max(1)).max(MIN_COLUMNS);
+        let mut units = Vec::new();
+        if p < DIRECT_PIXELS {
+            let n = (target / p.max(1)).max(1);
+            let mut i0 = a;
+            while i0 < b {
+                let m = n.min(b - i0);
+                units.push(Unit { i0, n: m, rows: (0, ho) });
+                i0 += m;
+            }
+        } else {
+            let band = (target / wo.max(1)).clamp(1, ho);
+            for i0 in a..b {
+                for oy0 in (0..ho).step_by(band) {
+                    units.push(Unit { i0, n: 1, rows: (oy0, (oy0 + band).min(ho)) });
+                }
+            }
+        }
+        units
+    }
+}
+
+/// One piece of work: `n` samples from `i0`, output rows `rows.0..rows.1` of each.
+#[derive(Clone, Copy, Debug)]
+struct Unit {
+    i0: usize,
+    n: usize,
+    rows: (usize, usize),
+}
+
+impl Unit {
+    /// Output columns of the piece's GEMM: samples × rows × output width.
+    fn cols(&self, s: &ConvShape) -> usize {
+        self.n * (self.rows.1 - self.rows.0) * s.out_w()
     }
 }
 
@@ -132,12 +174,15 @@ fn thread_ranges(batch: usize) -> Vec<(usize, usize)> {
     (0..parts).map(|t| (batch * t / parts, batch * (t + 1) / parts)).filter(|(a, b)| b > a).collect()
 }
 
-/// The im2col matrix of samples `x` (`n` samples, contiguous NCHW): `[cin·k·k, n·H'·W']`, rows in
-/// the kernel's `(c, ky, kx)` order, columns in `(sample, oy, ox)` order.
-fn im2col(s: &ConvShape, x: &[f32], n: usize, cols: &mut [f32]) {
+/// The im2col matrix of output rows `rows` of samples `x` (`n` samples, contiguous NCHW):
+/// `[cin·k·k, n·R·W']` for `R` rows, rows in the kernel's `(c, ky, kx)` order, columns in
+/// `(sample, oy, ox)` order.
+fn im2col(s: &ConvShape, x: &[f32], n: usize, rows: (usize, usize), cols: &mut [f32]) {
     let (k, pad, h, w) = (s.k, s.pad, s.h, s.w);
-    let (ho, wo) = (s.out_h(), s.out_w());
-    let ncols = n * ho * wo;
+    let wo = s.out_w();
+    let (r0, r1) = rows;
+    let nr = r1 - r0;
+    let ncols = n * nr * wo;
     debug_assert_eq!(cols.len(), s.kdim() * ncols);
     for c in 0..s.cin {
         for ky in 0..k {
@@ -146,25 +191,26 @@ fn im2col(s: &ConvShape, x: &[f32], n: usize, cols: &mut [f32]) {
                 // Output columns ox whose input column ix = ox + kx − pad lies in [0, w).
                 let lo = pad.saturating_sub(kx).min(wo);
                 let hi = (w + pad).saturating_sub(kx).min(wo).max(lo);
-                // Output rows oy whose input row iy = oy + ky − pad lies in [0, h).
-                let (ylo, yhi) = (pad.saturating_sub(ky).min(ho), (h + pad).saturating_sub(ky).min(ho));
-                let yhi = yhi.max(ylo);
+                // Output rows oy (within rows) whose input row iy = oy + ky − pad lies in [0, h),
+                // counted from r0.
+                let ylo = pad.saturating_sub(ky).clamp(r0, r1) - r0;
+                let yhi = (h + pad).saturating_sub(ky).clamp(r0, r1).max(ylo + r0) - r0;
                 // Where the copied part starts in the input row (used only when hi > lo).
                 let start = (lo + kx).saturating_sub(pad);
                 for i in 0..n {
                     let plane = &x[(i * s.cin + c) * h * w..][..h * w];
-                    let rows = &mut row[i * ho * wo..][..ho * wo];
-                    rows[..ylo * wo].fill(0.0);
-                    rows[yhi * wo..].fill(0.0);
+                    let dst_rows = &mut row[i * nr * wo..][..nr * wo];
+                    dst_rows[..ylo * wo].fill(0.0);
+                    dst_rows[yhi * wo..].fill(0.0);
                     if lo == 0 && hi == wo && wo == w {
                         // Whole input rows, contiguous on both sides: one copy.
-                        let src = &plane[(ylo + ky - pad) * w..(yhi + ky - pad) * w];
-                        rows[ylo * wo..yhi * wo].copy_from_slice(src);
+                        let src = &plane[(r0 + ylo + ky - pad) * w..(r0 + yhi + ky - pad) * w];
+                        dst_rows[ylo * wo..yhi * wo].copy_from_slice(src);
                         continue;
                     }
                     for oy in ylo..yhi {
-                        let dst = &mut rows[oy * wo..][..wo];
-                        let src = &plane[(oy + ky - pad) * w..][..w];
+                        let dst = &mut dst_rows[oy * wo..][..wo];
+                        let src = &plane[(r0 + oy + ky - pad) * w..][..w];
                         dst[..lo].fill(0.0);
                         dst[hi..].fill(0.0);
                         dst[lo..hi].copy_from_slice(&src[start..start + (hi - lo)]);
@@ -175,28 +221,28 @@ fn im2col(s: &ConvShape, x: &[f32], n: usize, cols: &mut [f32]) {
     }
 }
 
-/// Adds the im2col-shaped `cols` back into the NCHW input gradient `dx` of `n` samples (the
-/// adjoint of [`im2col`]).
-fn col2im(s: &ConvShape, cols: &[f32], n: usize, dx: &mut [f32]) {
+/// Adds the im2col-shaped `cols` of output rows `rows` back into the NCHW input gradient `dx` of
+/// `n` samples (the adjoint of [`im2col`]).
+fn col2im(s: &ConvShape, cols: &[f32], n: usize, rows: (usize, usize), dx: &mut [f32]) {
     let (k, pad, h, w) = (s.k, s.pad, s.h, s.w);
-    let (ho, wo) = (s.out_h(), s.out_w());
-    let ncols = n * ho * wo;
+    let wo = s.out_w();
+    let (r0, r1) = rows;
+    let nr = r1 - r0;
+    let ncols = n * nr * wo;
     for c in 0..s.cin {
         for ky in 0..k {
             for kx in 0..k {
                 let row = &cols[((c * k + ky) * k + kx) * ncols..][..ncols];
                 let lo = pad.saturating_sub(kx).min(wo);
                 let hi = (w + pad).saturating_sub(kx).min(wo).max(lo);
+                let ylo = pad.saturating_sub(ky).clamp(r0, r1) - r0;
+                let yhi = (h + pad).saturating_sub(ky).clamp(r0, r1).max(ylo + r0) - r0;
+                let start = (lo + kx).saturating_sub(pad);
                 for i in 0..n {
                     let plane = &mut dx[(i * s.cin + c) * h * w..][..h * w];
-                    for oy in 0..ho {
-                        let iy = oy + ky;
-                        if iy < pad || iy >= h + pad {
-                            continue;
-                        }
-                        let src = &row[(i * ho + oy) * wo..][..wo];
-                        let start = lo + kx - pad;
-                        let dst = &mut plane[(iy - pad) * w + start..][..hi - lo];
+                    for oy in ylo..yhi {
+                        let src = &row[(i * nr + oy) * wo..][..wo];
+                        let dst = &mut plane[(r0 + oy + ky - pad) * w + start..][..hi - lo];
                         for (d, v) in dst.iter_mut().zip(&src[lo..hi]) {
                             *d += v;
                         }
@@ -273,9 +319,7 @@ pub fn forward(s: &ConvShape, x: &[f32], weight: &[f32], bias: &[f32], relu: boo
     assert_eq!(weight.len(), s.cout * s.kdim(), "conv weight length");
     assert_eq!(bias.len(), s.cout, "conv bias length");
     assert_eq!(y.len(), s.batch * s.out_len(), "conv output length");
-    let (kd, p, o) = (s.kdim(), s.out_pixels(), s.cout);
-    let direct = p >= DIRECT_PIXELS;
-    let chunk = if direct { 1 } else { s.chunk() };
+    let (kd, p, o, wo) = (s.kdim(), s.out_pixels(), s.cout, s.out_w());
     let ranges = thread_ranges(s.batch);
     // Hand each thread the output rows of its range.
     let mut parts: Vec<(usize, usize, &mut [f32])> = Vec::with_capacity(ranges.len());
@@ -293,27 +337,28 @@ pub fn forward(s: &ConvShape, x: &[f32], weight: &[f32], bias: &[f32], relu: boo
         }
     };
     parts.into_par_iter().for_each(|(a, b, ypart)| {
-        let cap = chunk.min(b - a) * p;
-        with_scratch(kd * cap, if direct { 0 } else { o * cap }, |cols, out| {
-            let mut i0 = a;
-            while i0 < b {
-                let n = chunk.min(b - i0);
-                let nc = n * p;
+        let units = s.units(a, b);
+        let cap = units.iter().map(|u| u.cols(s)).max().unwrap_or(0);
+        let batched = p < DIRECT_PIXELS;
+        with_scratch(kd * cap, if batched { o * cap } else { 0 }, |cols, out| {
+            for u in units {
+                let nc = u.cols(s);
                 let cols = &mut cols[..kd * nc];
-                im2col(s, &x[i0 * s.in_len()..(i0 + n) * s.in_len()], n, cols);
-                if direct {
-                    // One sample: [cout, P] is its NCHW output already.
-                    let ys = &mut ypart[(i0 - a) * s.out_len()..][..s.out_len()];
-                    matmul(o, p, kd, ys, p, false, weight, (kd, 1), cols, (p, 1));
+                im2col(s, &x[u.i0 * s.in_len()..(u.i0 + u.n) * s.in_len()], u.n, u.rows, cols);
+                if !batched {
+                    // One sample's rows: [cout, rows·W'] is a strided block of its NCHW output.
+                    let ys = &mut ypart[(u.i0 - a) * s.out_len()..][..s.out_len()];
+                    let off = u.rows.0 * wo;
+                    matmul(o, nc, kd, &mut ys[off..], p, false, weight, (kd, 1), cols, (nc, 1));
                     for (oc, &bv) in bias.iter().enumerate() {
-                        act(&mut ys[oc * p..][..p], bv);
+                        act(&mut ys[oc * p + off..][..nc], bv);
                     }
                 } else {
                     let out = &mut out[..o * nc];
                     matmul(o, nc, kd, out, nc, false, weight, (kd, 1), cols, (nc, 1));
                     // Scatter [cout, n·P] into NCHW with bias (and ReLU).
-                    for i in 0..n {
-                        let ys = &mut ypart[(i0 - a + i) * s.out_len()..][..s.out_len()];
+                    for i in 0..u.n {
+                        let ys = &mut ypart[(u.i0 - a + i) * s.out_len()..][..s.out_len()];
                         for (oc, &bv) in bias.iter().enumerate() {
                             let dst = &mut ys[oc * p..][..p];
                             dst.copy_from_slice(&out[oc * nc + i * p..][..p]);
@@ -321,7 +366,6 @@ pub fn forward(s: &ConvShape, x: &[f32], weight: &[f32], bias: &[f32], relu: boo
                         }
                     }
                 }
-                i0 += n;
             }
         })
     });
@@ -372,8 +416,7 @@ pub fn backward(
     } else {
         None
     };
-    let (kd, p, o) = (s.kdim(), s.out_pixels(), s.cout);
-    let chunk = s.chunk();
+    let (kd, p, o, wo) = (s.kdim(), s.out_pixels(), s.cout, s.out_w());
     let ranges = thread_ranges(s.batch);
     let mut dx = want.x.then(|| vec![0f32; x.len()]);
     // Each thread's slice of dx.
@@ -396,23 +439,22 @@ pub fn backward(
             let mut dw = want.weight.then(|| vec![0f32; o * kd]);
             let mut db = want.bias.then(|| vec![0f32; o]);
             let need_cols = want.weight || want.x;
-            let cap = chunk.min(b - a) * p;
+            let units = s.units(a, b);
+            let cap = units.iter().map(|u| u.cols(s)).max().unwrap_or(0);
             with_scratch(if need_cols { kd * cap } else { 0 }, o * cap, |cols, dz| {
-                let mut first = true;
-                let mut i0 = a;
-                while i0 < b {
-                    let n = chunk.min(b - i0);
-                    let nc = n * p;
+                for (ui, u) in units.into_iter().enumerate() {
+                    let nc = u.cols(s);
+                    let (off, len) = (u.rows.0 * wo, (u.rows.1 - u.rows.0) * wo);
                     let dz = &mut dz[..o * nc];
-                    // Gather dy (masked by ReLU) into [cout, n·P]; sum the bias gradient.
-                    for i in 0..n {
-                        let base = (i0 + i) * s.out_len();
+                    // Gather dy (masked by ReLU) into [cout, n·rows·W']; sum the bias gradient.
+                    for i in 0..u.n {
+                        let base = (u.i0 + i) * s.out_len();
                         for oc in 0..o {
-                            let src = &dy[base + oc * p..][..p];
-                            let dst = &mut dz[oc * nc + i * p..][..p];
+                            let src = &dy[base + oc * p + off..][..len];
+                            let dst = &mut dz[oc * nc + i * len..][..len];
                             match mask {
                                 Some(y) => {
-                                    let ys = &y[base + oc * p..][..p];
+                                    let ys = &y[base + oc * p + off..][..len];
                                     for ((d, &g), &yv) in dst.iter_mut().zip(src).zip(ys) {
                                         *d = if yv > 0.0 { g } else { 0.0 };
                                     }
@@ -424,20 +466,20 @@ pub fn backward(
                             }
                         }
                     }
+                    let xs = &x[u.i0 * s.in_len()..(u.i0 + u.n) * s.in_len()];
                     if let Some(dw) = dw.as_mut() {
                         let cols = &mut cols[..kd * nc];
-                        im2col(s, &x[i0 * s.in_len()..(i0 + n) * s.in_len()], n, cols);
+                        im2col(s, xs, u.n, u.rows, cols);
                         // dW [cout, kd] += dz [cout, nc] · colsᵀ [nc, kd]
-                        matmul(o, kd, nc, dw, kd, !first, dz, (nc, 1), cols, (1, nc));
+                        matmul(o, kd, nc, dw, kd, ui > 0, dz, (nc, 1), cols, (1, nc));
                     }
                     if let Some(dxp) = dx_part.as_deref_mut() {
                         let dcols = &mut cols[..kd * nc];
                         // dcols [kd, nc] = Wᵀ [kd, cout] · dz [cout, nc]
                         matmul(kd, nc, o, dcols, nc, false, weight, (1, kd), dz, (nc, 1));
-                        col2im(s, dcols, n, &mut dxp[(i0 - a) * s.in_len()..(i0 - a + n) * s.in_len()]);
+                        let lo = (u.i0 - a) * s.in_len();
+                        col2im(s, dcols, u.n, u.rows, &mut dxp[lo..lo + u.n * s.in_len()]);
                     }
-                    first = false;
-                    i0 += n;
                 }
             });
             (dw, db)
@@ -546,9 +588,9 @@ mod tests {
         let n = s.kdim() * 2 * s.out_pixels();
         let c = values(n, 5);
         let mut cols = vec![0f32; n];
-        im2col(&s, &x, 2, &mut cols);
+        im2col(&s, &x, 2, (0, s.out_h()), &mut cols);
         let mut back = vec![0f32; x.len()];
-        col2im(&s, &c, 2, &mut back);
+        col2im(&s, &c, 2, (0, s.out_h()), &mut back);
         let lhs: f64 = cols.iter().zip(&c).map(|(a, b)| (*a as f64) * (*b as f64)).sum();
         let rhs: f64 = x.iter().zip(&back).map(|(a, b)| (*a as f64) * (*b as f64)).sum();
         assert!((lhs - rhs).abs() < 1e-4 * (1.0 + lhs.abs()), "{lhs} vs {rhs}");
