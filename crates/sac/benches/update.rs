@@ -203,6 +203,13 @@ fn main() {
     println!("device {} ({device:?}); sgemm peak (gemm crate, 1 thread, 1024³): {peak:.1} GFLOP/s", args.device);
     println!("model  config    thr batch  px | update s  peer s  ratio | GFLOP  GFLOP/s  of peak | act b1 ms  peer ms");
     let mut csv = Vec::new();
+    // One pool per thread count for the whole run (pools made and dropped per case left later
+    // cases up to 1.9x slower, from threads of dropped pools still winding down).
+    let pools: Vec<rayon::ThreadPool> = args
+        .threads
+        .iter()
+        .map(|&t| rayon::ThreadPoolBuilder::new().num_threads(t as usize).build().expect("thread pool"))
+        .collect();
     for preset_name in &presets {
         for &model in &models {
             let preset = TrainConfig::preset(preset_name, "block_pulling").expect("preset");
@@ -211,8 +218,7 @@ fn main() {
             let hidden = args.hidden.unwrap_or(hidden);
             let (s, b) = (preset.agent.input_size, args.batch.unwrap_or(preset.batch_size));
             let cfg = AgentConfig { model, hidden, input_size: s, ..AgentConfig::default() };
-            for &threads in &args.threads {
-                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads as usize).build().expect("thread pool");
+            for (&threads, pool) in args.threads.iter().zip(&pools) {
                 let (u, a, flops) = pool.install(|| {
                     let mut agent = Agent::new_on(cfg.clone(), 0, &device).expect("agent");
                     let data = batch(b, s, 3);
