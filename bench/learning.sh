@@ -7,8 +7,8 @@
 #                          [--out bench/out/learning] [--parallel 2] [--features tch]
 #                          [-- extra `equiarm train` flags]
 # Runs `--parallel` trainings at once, each with RAYON_NUM_THREADS (flex) and OMP_NUM_THREADS
-# (libtorch) = 2 / parallel. `--features tch -- --device torch` trains on libtorch (README, "A faster
-# CPU learner": torch 2.9.0 first on PATH and LIBTORCH_USE_PYTORCH=1).
+# (libtorch) = 2 / parallel. `--features tch -- --device torch` trains on libtorch (README, "The CPU
+# learner": torch 2.9.0 first on PATH and LIBTORCH_USE_PYTORCH=1).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 task=block_pulling preset=reduced seeds="0 1" models="equi cnn" out=bench/out/learning parallel=1 features=""
