@@ -432,7 +432,9 @@ pub fn backward(
         }
         None => dx_parts.extend(ranges.iter().map(|_| None)),
     }
-    let partials: Vec<(Option<Vec<f32>>, Option<Vec<f32>>)> = ranges
+    // Per thread: its partial weight and bias gradients.
+    type Partial = (Option<Vec<f32>>, Option<Vec<f32>>);
+    let partials: Vec<Partial> = ranges
         .par_iter()
         .zip(dx_parts.into_par_iter())
         .map(|(&(a, b), mut dx_part)| {
