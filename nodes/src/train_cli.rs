@@ -22,7 +22,7 @@ pub struct TrainArgs {
     #[arg(long)]
     pub in_process: bool,
     /// Preset: `reduced` (2-core CPU, fast), `reduced16` (the same frames at hidden 16 and the
-    /// paper's update count: about an hour with `--device torch`) or `paper` (PAPER_SPEC §2; meant
+    /// paper's update count: about 40 min of training on 2 cores) or `paper` (PAPER_SPEC §2; meant
     /// for a GPU).
     #[arg(long, default_value = "reduced")]
     pub preset: String,
