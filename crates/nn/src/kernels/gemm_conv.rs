@@ -174,6 +174,27 @@ fn thread_ranges(batch: usize) -> Vec<(usize, usize)> {
     (0..parts).map(|t| (batch * t / parts, batch * (t + 1) / parts)).filter(|(a, b)| b > a).collect()
 }
 
+/// Where kernel tap `(ky, kx)` reads inside the image, for output rows `rows`.
+struct Spans {
+    /// Output columns `lo..hi` whose input column `ox + kx − pad` lies in `[0, w)`.
+    lo: usize,
+    hi: usize,
+    /// Output rows `ylo..yhi`, counted from `rows.0`, whose input row `oy + ky − pad` lies in `[0, h)`.
+    ylo: usize,
+    yhi: usize,
+    /// Where the copied part starts in an input row (meaningful only when `hi > lo`).
+    start: usize,
+}
+
+fn spans(s: &ConvShape, ky: usize, kx: usize, (r0, r1): (usize, usize)) -> Spans {
+    let (pad, h, w, wo) = (s.pad, s.h, s.w, s.out_w());
+    let lo = pad.saturating_sub(kx).min(wo);
+    let hi = (w + pad).saturating_sub(kx).min(wo).max(lo);
+    let ylo = pad.saturating_sub(ky).clamp(r0, r1) - r0;
+    let yhi = (h + pad).saturating_sub(ky).clamp(r0, r1).max(ylo + r0) - r0;
+    Spans { lo, hi, ylo, yhi, start: (lo + kx).saturating_sub(pad) }
+}
+
 /// The im2col matrix of output rows `rows` of samples `x` (`n` samples, contiguous NCHW):
 /// `[cin·k·k, n·R·W']` for `R` rows, rows in the kernel's `(c, ky, kx)` order, columns in
 /// `(sample, oy, ox)` order.
@@ -188,15 +209,7 @@ fn im2col(s: &ConvShape, x: &[f32], n: usize, rows: (usize, usize), cols: &mut [
         for ky in 0..k {
             for kx in 0..k {
                 let row = &mut cols[((c * k + ky) * k + kx) * ncols..][..ncols];
-                // Output columns ox whose input column ix = ox + kx − pad lies in [0, w).
-                let lo = pad.saturating_sub(kx).min(wo);
-                let hi = (w + pad).saturating_sub(kx).min(wo).max(lo);
-                // Output rows oy (within rows) whose input row iy = oy + ky − pad lies in [0, h),
-                // counted from r0.
-                let ylo = pad.saturating_sub(ky).clamp(r0, r1) - r0;
-                let yhi = (h + pad).saturating_sub(ky).clamp(r0, r1).max(ylo + r0) - r0;
-                // Where the copied part starts in the input row (used only when hi > lo).
-                let start = (lo + kx).saturating_sub(pad);
+                let Spans { lo, hi, ylo, yhi, start } = spans(s, ky, kx, rows);
                 for i in 0..n {
                     let plane = &x[(i * s.cin + c) * h * w..][..h * w];
                     let dst_rows = &mut row[i * nr * wo..][..nr * wo];
@@ -233,11 +246,7 @@ fn col2im(s: &ConvShape, cols: &[f32], n: usize, rows: (usize, usize), dx: &mut 
         for ky in 0..k {
             for kx in 0..k {
                 let row = &cols[((c * k + ky) * k + kx) * ncols..][..ncols];
-                let lo = pad.saturating_sub(kx).min(wo);
-                let hi = (w + pad).saturating_sub(kx).min(wo).max(lo);
-                let ylo = pad.saturating_sub(ky).clamp(r0, r1) - r0;
-                let yhi = (h + pad).saturating_sub(ky).clamp(r0, r1).max(ylo + r0) - r0;
-                let start = (lo + kx).saturating_sub(pad);
+                let Spans { lo, hi, ylo, yhi, start } = spans(s, ky, kx, rows);
                 for i in 0..n {
                     let plane = &mut dx[(i * s.cin + c) * h * w..][..h * w];
                     for oy in ylo..yhi {
