@@ -268,22 +268,8 @@ fn main() {
                     1e3 * a,
                     1e3 * pa
                 );
-                csv.push(format!(
-                    "csv,{},{},{},{},{},{:.6},{:.6},{:.4},{:.3},{:.3},{:.4},{:.6},{:.6}",
-                    model.name(),
-                    preset_name,
-                    threads,
-                    b,
-                    s,
-                    u,
-                    pu,
-                    u / pu,
-                    gflop,
-                    rate,
-                    of_peak,
-                    a,
-                    pa
-                ));
+                let figures = [u, pu, u / pu, gflop, rate, of_peak, a, pa].map(|v| format!("{v:.6}")).join(",");
+                csv.push(format!("csv,{},{preset_name},{threads},{b},{s},{figures}", model.name()));
             }
         }
     }
