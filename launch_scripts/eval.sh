@@ -8,7 +8,7 @@
 #   --task T           block_pulling (default), block_pushing, block_picking, drawer_opening, block_in_bowl
 #   --episodes M       evaluation episodes (default 20)
 #   --seed S           base seed of the episodes (default 1000; the same S gives the same M scenes)
-#   --preset P         reduced (default), reduced16 or paper: the network's sizes (image FRAME:INPUT, hidden, model)
+#   --preset P         reduced16 (default), reduced or paper: the network's sizes (image FRAME:INPUT, hidden, model)
 #                      come from launch_scripts/configs/<preset>_<task>.json
 #   --config FILE      a training config JSON to read those sizes from instead (e.g. RUN/config.json)
 #   --model M          equi, cnn or sen (default: the config's)
@@ -27,7 +27,7 @@ here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 source "$here/lib.sh"
 eqa_default_signals "$0" "$@"
 
-checkpoint="" task=block_pulling episodes=20 seed=1000 preset=reduced config="" model="" out="" timeout_s=1800
+checkpoint="" task=block_pulling episodes=20 seed=1000 preset=reduced16 config="" model="" out="" timeout_s=1800
 usage() { sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; }
 while [ $# -gt 0 ]; do
   case $1 in

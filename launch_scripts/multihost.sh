@@ -13,7 +13,7 @@
 #
 # Options:
 #   --task T             task (default block_pulling)
-#   --preset P           reduced (default), reduced16 or paper
+#   --preset P           reduced16 (default), reduced or paper
 #   --seconds S          run for S seconds, then stop (default 120; 0: until the trainer exits)
 #   --total-updates U    pass --total-updates U to the trainer (the run ends when it exits)
 #   --out DIR            run directory (trainer's run dir DIR/run, bag DIR/bag, logs DIR/logs;
@@ -36,7 +36,7 @@ here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 source "$here/lib.sh"
 eqa_default_signals "$0" "$@"
 
-task=block_pulling preset=reduced seconds=120 total_updates="" out="" check=0 cleanup_only=0
+task=block_pulling preset=reduced16 seconds=120 total_updates="" out="" check=0 cleanup_only=0
 usage() { sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; }
 while [ $# -gt 0 ]; do
   case $1 in

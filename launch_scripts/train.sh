@@ -13,9 +13,9 @@
 # saves a checkpoint; SIGKILL after EQA_STOP_TIMEOUT_S, default 30 s), and prints the evaluation
 # table and where the bag, checkpoints, metrics and learning curve are.
 #
-# Options (defaults: the reduced CPU config of block pulling, 5 envs, seed 0):
+# Options (defaults: block pulling at the reduced16 CPU config, 5 envs, seed 0):
 #   --task T            block_pulling | block_pushing | block_picking | drawer_opening | block_in_bowl
-#   --preset P          reduced (2-core CPU) | reduced16 (hidden 16, 5,000 updates) | paper (PAPER_SPEC §2, for a GPU)
+#   --preset P          reduced16 (2-core CPU, ~30 min) | reduced (hidden 8, 1,250 updates: fast, learns little) | paper (PAPER_SPEC §2, for a GPU)
 #   --config FILE       a JSON run config (launch_scripts/configs/*.json); replaces the preset
 #   --num-envs N        sim+policy pairs (the paper uses 5)
 #   --seed S            base seed
@@ -38,7 +38,7 @@ source "$(dirname "$0")/lib.sh"
 eqa_default_signals "$0" "$@"
 cd "$(dirname "$0")/.."
 
-task=block_pulling preset=reduced config="" num_envs=5 seed=0 run_dir="" total_updates="" record=1 det=0
+task=block_pulling preset=reduced16 config="" num_envs=5 seed=0 run_dir="" total_updates="" record=1 det=0
 extra=()
 while [ $# -gt 0 ]; do
   case "$1" in

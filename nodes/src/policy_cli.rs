@@ -1,5 +1,5 @@
 //! `equiarm policy`'s options and the actor architecture they describe (a checkpoint's manifest, or
-//! the flags over the reduced preset).
+//! the flags over the default preset (`reduced16`)).
 
 use std::path::PathBuf;
 
@@ -22,13 +22,13 @@ pub struct PolicyArgs {
     /// latest checkpoint). Directories give the architecture from their manifest.
     #[arg(long)]
     pub checkpoint: Option<PathBuf>,
-    /// Network family when there is no manifest: equi, cnn or sen (default: the reduced preset's).
+    /// Network family when there is no manifest: equi, cnn or sen (default: the default preset's).
     #[arg(long)]
     pub model: Option<String>,
-    /// Hidden size when there is no manifest (default: the reduced preset's).
+    /// Hidden size when there is no manifest (default: the default preset's).
     #[arg(long)]
     pub hidden: Option<usize>,
-    /// Frame and network input size as FRAME:INPUT when there is no manifest (default: reduced preset).
+    /// Frame and network input size as FRAME:INPUT when there is no manifest (default: the default preset's).
     #[arg(long)]
     pub image: Option<String>,
     /// Seed of the initial weights, the sampling noise and the random mode.
@@ -68,9 +68,9 @@ pub fn architecture(args: &PolicyArgs) -> anyhow::Result<(AgentConfig, usize, Op
         let m = equiarm_sac::learner::read_manifest(&dir)?;
         return Ok((m.config.agent.clone(), m.config.image_size, Some(dir.join("actor.safetensors"))));
     }
-    let reduced = TrainConfig::reduced("block_pulling");
-    let mut agent = reduced.agent.clone();
-    let mut frame = reduced.image_size;
+    let preset = TrainConfig::preset(TrainConfig::DEFAULT_PRESET, "block_pulling").context("the default preset")?;
+    let mut agent = preset.agent.clone();
+    let mut frame = preset.image_size;
     if let Some(m) = &args.model {
         agent.model = ModelKind::parse(m).with_context(|| format!("unknown --model `{m}`: use equi, cnn or sen"))?;
     }

@@ -21,10 +21,10 @@ pub struct TrainArgs {
     /// Run the envs inside this process (no DDS): the transport-free loop.
     #[arg(long)]
     pub in_process: bool,
-    /// Preset: `reduced` (2-core CPU, fast), `reduced16` (the same frames at hidden 16 and the
-    /// paper's update count: about 40 min of training on 2 cores) or `paper` (PAPER_SPEC §2; meant
-    /// for a GPU).
-    #[arg(long, default_value = "reduced")]
+    /// Preset: `reduced16` (38 → 32 px frames, hidden 16, the paper's update count: about 30 min
+    /// of training on 2 cores), `reduced` (the same frames at hidden 8 and a quarter of the
+    /// updates: fast, learns little) or `paper` (PAPER_SPEC §2; meant for a GPU).
+    #[arg(long, default_value = TrainConfig::DEFAULT_PRESET)]
     pub preset: String,
     /// JSON config file (replaces the preset; flags below still override it).
     #[arg(long)]
@@ -82,8 +82,8 @@ pub struct TrainArgs {
     #[arg(long)]
     pub resume: Option<PathBuf>,
     /// Where the learner's networks run: cpu (default), cuda or cuda:N (an NVIDIA GPU; needs a
-    /// binary built with `--features cuda`), torch (libtorch's CPU kernels; needs `--features
-    /// tch`). Checked at start. Not part of the config: checkpoints resume on any.
+    /// binary built with `--features cuda`). Checked at start. Not part of the config: checkpoints
+    /// resume on any.
     #[arg(long, default_value = "cpu", value_parser = equiarm_nn::device::open)]
     pub device: Device,
     /// Print the resulting config as JSON and exit.
@@ -245,7 +245,7 @@ mod tests {
     #[test]
     fn flags_override_the_preset() {
         let base = config(&[]).unwrap();
-        assert_eq!(base, TrainConfig::reduced("block_pulling"));
+        assert_eq!(base, TrainConfig::reduced16("block_pulling"));
         let cfg = config(&["--task", "drawer_opening", "--lr", "0.003", "--hidden", "16", "--image", "76:64"]).unwrap();
         assert_eq!(cfg.task, "drawer_opening");
         assert_eq!(cfg.agent.lr, 0.003);

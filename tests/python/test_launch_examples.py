@@ -208,7 +208,7 @@ def test_launch_file_declares_its_arguments(launch_file):
     declared, _ = launch_file()
     for name in ("task", "preset", "num_envs", "seed", "run_dir", "total_updates", "deterministic", "equiarm"):
         assert name in declared
-    assert declared["equiarm"] == "equiarm" and declared["preset"] == "reduced"
+    assert declared["equiarm"] == "equiarm" and declared["preset"] == "reduced16"
 
 
 def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):

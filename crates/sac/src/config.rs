@@ -162,6 +162,10 @@ impl TrainConfig {
         }
     }
 
+    /// The preset `equiarm train`, the launch scripts and a policy without a manifest use when none
+    /// is named: the CPU config at which Equi SAC reaches the paper's block-pulling result.
+    pub const DEFAULT_PRESET: &'static str = "reduced16";
+
     /// The preset names [`TrainConfig::preset`] knows, for help texts and errors.
     pub const PRESETS: &'static str = "reduced, reduced16 or paper";
 
