@@ -4,11 +4,9 @@
 # and a table of the final evaluation. Prints the wall time of each run.
 #
 #   bash bench/learning.sh [--task block_pulling] [--preset reduced] [--seeds "0 1"] [--models "equi cnn"]
-#                          [--out bench/out/learning] [--parallel 2] [--features tch]
+#                          [--out bench/out/learning] [--parallel 2] [--features F]
 #                          [-- extra `equiarm train` flags]
-# Runs `--parallel` trainings at once, each with RAYON_NUM_THREADS (flex) and OMP_NUM_THREADS
-# (libtorch) = 2 / parallel. `--features tch -- --device torch` trains on libtorch (README, "The CPU
-# learner": torch 2.9.0 first on PATH and LIBTORCH_USE_PYTORCH=1).
+# Runs `--parallel` trainings at once, each with RAYON_NUM_THREADS = 2 / parallel.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 task=block_pulling preset=reduced seeds="0 1" models="equi cnn" out=bench/out/learning parallel=1 features=""
@@ -29,11 +27,6 @@ done
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/equiarm/target}"
 cargo build --locked --quiet --bin equiarm --example compare_runs -p equiarm -p equiarm_sac ${features:+--features "equiarm/$features"}
 bin=$CARGO_TARGET_DIR/debug/equiarm
-if [[ " $features " == *" tch "* ]]; then
-  # compare_runs (an equiarm_sac example) is linked against libtorch too; equiarm has an rpath.
-  torch_lib=$(python -c 'import os, torch; print(os.path.join(os.path.dirname(torch.__file__), "lib"))')
-  export LD_LIBRARY_PATH="$torch_lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
-fi
 mkdir -p "$out"
 threads=$(( 2 / parallel )); [ "$threads" -lt 1 ] && threads=1
 jobs=()
@@ -45,7 +38,7 @@ for j in "${jobs[@]}"; do
   rm -rf "$dir"
   (
     t0=$(date +%s)
-    RAYON_NUM_THREADS=$threads OMP_NUM_THREADS=$threads "$bin" train --in-process --preset "$preset" --task "$task" --model "$m" --seed "$s" \
+    RAYON_NUM_THREADS=$threads "$bin" train --in-process --preset "$preset" --task "$task" --model "$m" --seed "$s" \
       --run-dir "$dir" -q "${extra[@]}" > "$dir.log" 2>&1
     echo "$m seed $s: $(( $(date +%s) - t0 )) s wall" | tee "$dir.time"
   ) &

@@ -1,7 +1,8 @@
 //! Where tensors live, chosen at run time by name: `cpu` (burn's pure-Rust `flex` backend, the
-//! default), `cuda` / `cuda:N` (an NVIDIA GPU through burn's CubeCL CUDA backend; only in a
-//! binary built with the `cuda` feature) or `torch` (libtorch's CPU kernels through burn's `tch`
-//! backend; only in a binary built with the `tch` feature, see the README).
+//! default, with our own convolution kernels) or `cuda` / `cuda:N` (an NVIDIA GPU through burn's
+//! CubeCL CUDA backend; only in a binary built with the `cuda` feature). `torch` (libtorch through
+//! burn's `tch` backend) was removed once `cpu` became faster than it: asking for it is an error
+//! that says so (`docs/backends.md`).
 //!
 //! ```
 //! let cpu = equiarm_nn::device::parse("cpu").unwrap();
@@ -22,7 +23,7 @@ use burn::tensor::{Device, Tensor};
 use thiserror::Error;
 
 /// The device names [`parse`] accepts, for help texts and errors.
-pub const CHOICES: &str = "`cpu` (the default), `cuda` or `cuda:N` (CUDA device N), `torch` (libtorch on the CPU)";
+pub const CHOICES: &str = "`cpu` (the default) or `cuda` / `cuda:N` (CUDA device N)";
 
 /// A device name that cannot be used.
 #[derive(Clone, Debug, Error, PartialEq, Eq)]
@@ -47,11 +48,11 @@ pub enum DeviceError {
         /// The name given.
         name: String,
     },
-    /// The libtorch CPU device was asked of a binary built without the `tch` feature.
+    /// The libtorch CPU device, which equiarm no longer has.
     #[error(
-        "device `{name}`: this binary was built without the `tch` feature: rebuild with `LIBTORCH_USE_PYTORCH=1 cargo build --release --features tch` in a Python environment with torch 2.9.0"
+        "device `{name}`: equiarm no longer has a libtorch backend: use `cpu` (the default), whose own convolution kernels run an SAC update faster than libtorch did (docs/backends.md)"
     )]
-    NoTorch {
+    TorchRemoved {
         /// The name given.
         name: String,
     },
@@ -76,19 +77,15 @@ pub const fn cuda_enabled() -> bool {
     cfg!(feature = "cuda")
 }
 
-/// True when this binary was built with the `tch` feature (the `torch` device).
-pub const fn torch_enabled() -> bool {
-    cfg!(feature = "tch")
-}
-
 /// The device named `name` (case-insensitive, surrounding blanks ignored): `cpu` (also `flex`,
-/// burn's name for it), `cuda` (device 0), `cuda:N` or `torch` (also `libtorch`). Returns the plain (non-autodiff) device;
-/// callers add autodiff where they train.
+/// burn's name for it), `cuda` (device 0) or `cuda:N`. Returns the plain (non-autodiff) device;
+/// callers add autodiff where they train. `torch` (or `libtorch`) is refused with
+/// [`DeviceError::TorchRemoved`].
 pub fn parse(name: &str) -> Result<Device, DeviceError> {
     match choice(name)? {
         Choice::Cpu => Ok(cpu()),
         Choice::Cuda(index) => cuda(index).ok_or_else(|| DeviceError::NoCuda { name: name.to_string() }),
-        Choice::Torch => torch().ok_or_else(|| DeviceError::NoTorch { name: name.to_string() }),
+        Choice::Torch => Err(DeviceError::TorchRemoved { name: name.to_string() }),
     }
 }
 
@@ -123,17 +120,6 @@ fn cuda(index: usize) -> Option<Device> {
 
 #[cfg(not(feature = "cuda"))]
 fn cuda(_index: usize) -> Option<Device> {
-    None
-}
-
-#[cfg(feature = "tch")]
-#[allow(deprecated)] // burn-tch is marked deprecated in burn 0.22; it still builds and runs.
-fn torch() -> Option<Device> {
-    Some(Device::libtorch())
-}
-
-#[cfg(not(feature = "tch"))]
-fn torch() -> Option<Device> {
     None
 }
 
@@ -224,16 +210,11 @@ mod tests {
     }
 
     #[test]
-    fn the_torch_device_needs_the_tch_feature() {
+    fn the_removed_torch_device_is_refused_with_the_reason() {
         for name in ["torch", "TORCH", " libtorch "] {
-            match open(name) {
-                Ok(d) => assert!(torch_enabled() && !d.is_autodiff() && d != cpu(), "{name}: {d:?}"),
-                Err(e @ DeviceError::NoTorch { .. }) => {
-                    assert!(!torch_enabled());
-                    assert!(e.to_string().contains("built without the `tch` feature"), "{e}");
-                }
-                Err(e) => panic!("{name}: {e}"),
-            }
+            let e = open(name).unwrap_err();
+            assert_eq!(e, DeviceError::TorchRemoved { name: name.into() });
+            assert!(e.to_string().contains("no longer has a libtorch backend: use `cpu`"), "{e}");
         }
     }
 
@@ -243,7 +224,7 @@ mod tests {
             let e = parse(name).unwrap_err();
             assert_eq!(e, DeviceError::Unknown { name: name.into() });
             let text = e.to_string();
-            assert!(text.contains("`cpu`") && text.contains("`cuda:N`") && text.contains("`torch`"), "{text}");
+            assert!(text.contains("`cpu`") && text.contains("`cuda:N`"), "{text}");
         }
     }
 

@@ -12,7 +12,7 @@
 //! then one `csv,` line per case and the peak RSS.
 //!
 //! `cargo bench -p equiarm_sac --bench update -- [--reps 5] [--config reduced16|paper|all]
-//!   [--model equi|cnn|sen|all] [--threads 1,2] [--no-peer] [--device cpu|torch|cuda[:N]]`
+//!   [--model equi|cnn|sen|all] [--threads 1,2] [--no-peer] [--device cpu|cuda[:N]]`
 //! (the bench profile builds everything in release; `--profile dev` gives close figures from the
 //! test build's target directory). Threads: one rayon pool per thread count for our side,
 //! `torch.set_num_threads` for the peer.

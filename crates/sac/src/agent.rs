@@ -888,43 +888,4 @@ mod tests {
         assert!(e.contains("actor.safetensors"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
     }
-
-    /// With the `tch` feature: the libtorch agent follows the flex agent (same seed, same batches)
-    /// to float rounding, for every model, and a checkpoint saved by one loads on the other.
-    #[cfg(feature = "tch")]
-    #[test]
-    fn the_torch_agent_follows_the_flex_agent() {
-        let torch = equiarm_nn::device::open("torch").unwrap();
-        let close = |a: f32, b: f32, what: &str| {
-            assert!((a - b).abs() <= 2e-3 * (1.0 + a.abs().max(b.abs())), "{what}: flex {a} against torch {b}");
-        };
-        for model in [ModelKind::Equi, ModelKind::Cnn, ModelKind::Sen] {
-            let cfg = AgentConfig { input_size: 16, ..tiny(model) };
-            let batches: Vec<Batch> = (0..4).map(|i| batch(6, 16, 20 + i)).collect();
-            let mut f = Agent::new(cfg.clone(), 7).unwrap();
-            let mut t = Agent::new_on(cfg.clone(), 7, &torch).unwrap();
-            assert_eq!(t.device(), &torch);
-            for (i, b) in batches.iter().enumerate() {
-                let (mf, mt) = (f.update(b.clone()).unwrap().0, t.update(b.clone()).unwrap().0);
-                for ((name, x), (_, y)) in mf.named().iter().zip(mt.named().iter()) {
-                    close(*x as f32, *y as f32, &format!("{model:?} update {i} {name}"));
-                }
-            }
-            let x = &batches[0].obs[..5 * 16 * 16];
-            let (af, at) = (f.act(x, 1, ActMode::Greedy, None).unwrap(), t.act(x, 1, ActMode::Greedy, None).unwrap());
-            for (a, b) in af[0].iter().zip(at[0].iter()) {
-                close(*a, *b, &format!("{model:?} greedy action"));
-            }
-            // The torch agent's checkpoint, loaded on flex, acts as the torch agent does.
-            let dir = crate::scratch::Scratch::new(&format!("torch-{model:?}"));
-            std::fs::create_dir_all(&dir).unwrap();
-            t.save(&dir).unwrap();
-            let mut back = Agent::new(cfg, 0).unwrap();
-            back.load(&dir).unwrap();
-            for (a, b) in back.act(x, 1, ActMode::Greedy, None).unwrap()[0].iter().zip(at[0].iter()) {
-                close(*a, *b, &format!("{model:?} reloaded greedy action"));
-            }
-            std::fs::remove_dir_all(&dir).ok();
-        }
-    }
 }
