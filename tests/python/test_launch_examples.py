@@ -214,7 +214,7 @@ def test_launch_file_declares_its_arguments(launch_file):
 def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
     _, procs = launch_file(task="block_picking", num_envs="3", seed="7", run_dir="runs/x", total_updates="40",
                            equiarm="/opt/eq/equiarm")
-    cfg = json.loads((SCRIPTS / "configs" / "reduced_block_picking.json").read_text())
+    cfg = json.loads((SCRIPTS / "configs" / "reduced16_block_picking.json").read_text())
     frame, image = cfg["image_size"], f"{cfg['image_size']}:{cfg['agent']['input_size']}"
     assert sorted(procs) == sorted(["recorder", "trainer", "sim_env0", "policy_env0", "sim_env1", "policy_env1",
                                     "sim_env2", "policy_env2", "sim_eval", "policy_eval"])
@@ -225,7 +225,7 @@ def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
     assert tr[1] == "train" and "--in-process" not in tr
     assert (_flag(tr, "--preset"), _flag(tr, "--task"), _flag(tr, "--num-envs"), _flag(tr, "--seed"),
             _flag(tr, "--run-dir"), _flag(tr, "--total-updates"), _flag(tr, "--eval-namespace")) == \
-        ("reduced", "block_picking", "3", "7", "runs/x", "40", "/eval")
+        ("reduced16", "block_picking", "3", "7", "runs/x", "40", "/eval")
     assert "on_exit" in procs["trainer"].kwargs  # the launch ends with the trainer
     for k, ns in enumerate(["/env0", "/env1", "/env2", "/eval"]):
         name = ns.strip("/")
