@@ -149,9 +149,9 @@ impl TrainConfig {
     /// update count (5,000; 10,000 for block in bowl). The CPU config at which Equi SAC does what
     /// the paper reports on block pulling (≥ 0.8 evaluation success, ahead of CNN SAC); the
     /// figures per seed and the run times are in the README, "Learning so far". An Equi update
-    /// takes about 0.4 s at one thread on the default build (about 40 min of training for a run);
-    /// the fast `reduced` preset is the one the main job uses. Only block pulling has been run at
-    /// this preset.
+    /// takes about 0.4 s at one thread and 0.2 s at two on the default build (about 30 min of
+    /// training for a run on 2 cores). The default preset ([`TrainConfig::DEFAULT_PRESET`]), the
+    /// main job's. Only block pulling has been run at this preset.
     pub fn reduced16(task: &str) -> Self {
         let paper = TrainConfig::paper(task);
         let reduced = TrainConfig::reduced(task);
