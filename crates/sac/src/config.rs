@@ -148,7 +148,7 @@ impl TrainConfig {
     /// [`TrainConfig::reduced`]'s frames and batch with hidden 16, Adam 3e-3 and the paper's
     /// update count (5,000; 10,000 for block in bowl). The CPU config at which Equi SAC does what
     /// the paper reports on block pulling (≥ 0.8 evaluation success, ahead of CNN SAC); the
-    /// figures per seed and the run times are in the README, "Learning so far". An Equi update
+    /// figures per seed and the run times are in `docs/experiments/learning.md`. An Equi update
     /// takes about 0.4 s at one thread and 0.2 s at two on the default build (about 30 min of
     /// training for a run on 2 cores). The default preset ([`TrainConfig::DEFAULT_PRESET`]), the
     /// main job's. Only block pulling has been run at this preset.
