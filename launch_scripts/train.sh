@@ -22,6 +22,8 @@
 #   --run-dir DIR       where everything goes (default runs/<task>-<date>)
 #   --total-updates U   override the config's number of updates
 #   --no-record         do not record a bag
+#   --force             a --run-dir that holds a run (metrics, checkpoints) is moved aside to
+#                       RUN_DIR.old-N first (without it such a directory is refused)
 #   --deterministic     lock-step rounds: the trainer and the training policies get --deterministic
 #                       (no --max-lead); with one seed two runs record the same /transitions of the
 #                       training envs and end with the same weights. The eval pair is not lock-stepped:
@@ -38,7 +40,7 @@ source "$(dirname "$0")/lib.sh"
 eqa_default_signals "$0" "$@"
 cd "$(dirname "$0")/.."
 
-task=block_pulling preset=reduced16 config="" num_envs=5 seed=0 run_dir="" total_updates="" record=1 det=0
+task=block_pulling preset=reduced16 config="" num_envs=5 seed=0 run_dir="" total_updates="" record=1 det=0 force=0
 extra=()
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -50,9 +52,10 @@ while [ $# -gt 0 ]; do
     --run-dir) run_dir=$2; shift 2 ;;
     --total-updates) total_updates=$2; shift 2 ;;
     --no-record) record=0; shift ;;
+    --force) force=1; shift ;;
     --deterministic) det=1; shift ;;
     --) shift; extra=("$@"); break ;;
-    -h|--help) sed -n '2,32p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,35p' "$0"; exit 0 ;;
     *) echo "train.sh: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -64,6 +67,21 @@ export ROS_LOCALHOST_ONLY=${ROS_LOCALHOST_ONLY:-1}
 eqa_bin
 bin=$EQUIARM_BIN
 
+# Never overwrite a run: a directory holding one is refused, or moved aside with --force (a
+# `-- --resume` of that run continues in it: the trainer checks that).
+held=()
+if [[ " ${extra[*]} " != *" --resume "* ]]; then
+  for f in metrics.csv metrics.jsonl evals.json checkpoints bag; do [ -e "$run_dir/$f" ] && held+=("$f"); done
+fi
+if [ ${#held[@]} -gt 0 ]; then
+  if [ $force = 0 ]; then
+    echo "train.sh: $run_dir holds a run already (${held[*]}): choose another --run-dir, or pass --force to move it aside" >&2
+    exit 2
+  fi
+  n=1; while [ -e "$run_dir.old-$n" ]; do n=$((n + 1)); done
+  mv "$run_dir" "$run_dir.old-$n"
+  echo "== the previous run in $run_dir was moved aside to $run_dir.old-$n"
+fi
 # The run config, resolved once and handed to every process.
 mkdir -p "$run_dir"
 cfg_args=(--preset "$preset" --task "$task" --num-envs "$num_envs" --seed "$seed")

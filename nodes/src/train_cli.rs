@@ -107,6 +107,10 @@ pub struct TrainArgs {
     /// same transitions and the same weights. Not with --resume.
     #[arg(long)]
     pub deterministic: bool,
+    /// A new run in a --run-dir that already holds a run (metrics, checkpoints) moves that run
+    /// aside to RUN_DIR.old-N instead of refusing to start.
+    #[arg(long)]
+    pub force: bool,
 }
 
 impl TrainArgs {
@@ -172,7 +176,14 @@ pub fn run_in_process(args: &TrainArgs, cfg: TrainConfig) -> anyhow::Result<RunS
         Some(p) => Some(equiarm_sac::train::find_checkpoint(p)?),
         None => None,
     };
-    let opts = RunOptions { run_dir: args.run_dir(), resume, stop_at: None, progress: !args.quiet, device: args.device.clone() };
+    let opts = RunOptions {
+        run_dir: args.run_dir(),
+        resume,
+        stop_at: None,
+        progress: !args.quiet,
+        device: args.device.clone(),
+        force: args.force,
+    };
     let flag = stop.clone();
     let summary = equiarm_sac::train::run(cfg, &opts, &move || flag.load(Ordering::Relaxed))?;
     Ok(summary)

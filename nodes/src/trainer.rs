@@ -141,7 +141,7 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     }
     let started = Instant::now();
     let dir = args.run_dir();
-    let _claim = equiarm_sac::train::RunDirLock::acquire(&dir)?;
+    let _claim = equiarm_sac::train::RunDirLock::acquire_for(&dir, args.resume.as_deref(), args.force)?;
     write_json(&dir.join("config.json"), &cfg).map_err(anyhow::Error::msg)?;
     let mut learner = Learner::with_device(cfg.clone(), args.device.clone())?;
     let mut st = NodeState::default();

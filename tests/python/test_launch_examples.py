@@ -331,6 +331,27 @@ def test_eval_sh_refuses_without_a_checkpoint(tmp_path):
     assert r.returncode == 2 and "does not exist" in r.stderr
 
 
+def test_train_sh_never_overwrites_a_run(tmp_path):
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    (run / "metrics.csv").write_text("kept\n")
+    (run / "config.json").write_text("{\"old\": 1}\n")
+    env = dict(os.environ, EQUIARM_BIN="/bin/false", ROS_DOMAIN_ID="77")
+    r = subprocess.run(["bash", str(SCRIPTS / "train.sh"), "--run-dir", str(run)], capture_output=True, text=True,
+                       timeout=30, env=env)
+    assert r.returncode == 2 and "holds a run already (metrics.csv checkpoints)" in r.stderr, r.stderr
+    assert "--force" in r.stderr
+    assert (run / "metrics.csv").read_text() == "kept\n" and (run / "config.json").read_text() == "{\"old\": 1}\n"
+    # --force moves the old run aside whole before anything is written (here /bin/false then
+    # fails the config step, which is beside the point).
+    r = subprocess.run(["bash", str(SCRIPTS / "train.sh"), "--run-dir", str(run), "--force"], capture_output=True,
+                       text=True, timeout=30, env=env)
+    assert "moved aside to" in r.stdout, r.stdout + r.stderr
+    old = tmp_path / "run.old-1"
+    assert (old / "metrics.csv").read_text() == "kept\n" and (old / "config.json").read_text() == "{\"old\": 1}\n"
+    assert (old / "checkpoints").is_dir() and not (run / "metrics.csv").exists()
+
+
 def test_multihost_sh_skips_without_root():
     if os.geteuid() == 0 and not _can_drop_root():
         pytest.skip("running as root without setpriv")

@@ -91,4 +91,3 @@ pub fn observation(seq: u64, size: u32, seed: u32) -> Observation {
         expert_action: command_typical(),
     }
 }
-

@@ -221,12 +221,22 @@ pub struct RunOptions {
     /// Where the agent's tensors live (default: the CPU, `flex`). A GPU's results are not
     /// bit-identical to the CPU's; exact resume is tested on the CPU.
     pub device: Device,
+    /// A new run in a directory that holds a run moves that run aside (`RUN_DIR.old-N`) instead
+    /// of being refused ([`RunDirLock::acquire_new`]).
+    pub force: bool,
 }
 
 impl Default for RunOptions {
     fn default() -> Self {
         // Not `Device::default()`: that is the GPU in a build with the `cuda` feature.
-        RunOptions { run_dir: PathBuf::new(), resume: None, stop_at: None, progress: false, device: equiarm_nn::device::cpu() }
+        RunOptions {
+            run_dir: PathBuf::new(),
+            resume: None,
+            stop_at: None,
+            progress: false,
+            device: equiarm_nn::device::cpu(),
+            force: false,
+        }
     }
 }
 
@@ -234,7 +244,7 @@ impl Default for RunOptions {
 /// the loop writes a checkpoint and returns.
 pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Result<RunSummary, TrainError> {
     let io = |path: &Path, e: &dyn std::fmt::Display| TrainError::Io { path: path.into(), message: e.to_string() };
-    let _claim = RunDirLock::acquire(&opts.run_dir)?;
+    let _claim = RunDirLock::acquire_for(&opts.run_dir, opts.resume.as_deref(), opts.force)?;
     let started = Instant::now();
     let mut learner = Learner::with_device(cfg.clone(), opts.device.clone())?;
     let env_cfg = env_config(&cfg);
@@ -500,6 +510,57 @@ impl RunDirLock {
     }
 }
 
+/// What a run leaves in its directory that a new run there would overwrite or mix with its own.
+pub const RUN_FILES: [&str; 4] = ["metrics.csv", "metrics.jsonl", "evals.json", "checkpoints"];
+
+impl RunDirLock {
+    /// Claim `run_dir` for a run that starts there: a new run ([`RunDirLock::acquire_new`]), or
+    /// one that resumes `resume` in its own run directory, which may hold that run.
+    pub fn acquire_for(run_dir: &Path, resume: Option<&Path>, force: bool) -> Result<Self, TrainError> {
+        let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+            (Ok(a), Ok(b)) => a == b,
+            _ => a == b,
+        };
+        match resume.and_then(run_dir_of) {
+            Some(resumed) if same(&resumed, run_dir) => Self::acquire(run_dir),
+            _ => Self::acquire_new(run_dir, force),
+        }
+    }
+
+    /// Claim `run_dir` for a new run. A directory that already holds a run (any of
+    /// [`RUN_FILES`]) is refused, with the ways out, so that no run is overwritten by accident;
+    /// with `force` the old directory is first moved aside to `RUN_DIR.old-N` (the first free N).
+    /// Other files (a `config.json` written by a launch script) do not count.
+    pub fn acquire_new(run_dir: &Path, force: bool) -> Result<Self, TrainError> {
+        let claim = Self::acquire(run_dir)?;
+        let found: Vec<&str> = RUN_FILES.iter().copied().filter(|f| run_dir.join(f).exists()).collect();
+        if found.is_empty() {
+            return Ok(claim);
+        }
+        if !force {
+            return Err(TrainError::Io {
+                path: run_dir.into(),
+                message: format!(
+                    "holds a run already ({}): continue it with --resume {}, choose another --run-dir, or pass --force to move it aside",
+                    found.join(", "),
+                    run_dir.display()
+                ),
+            });
+        }
+        let aside = (1u32..)
+            .map(|n| PathBuf::from(format!("{}.old-{n}", run_dir.display())))
+            .find(|p| !p.exists())
+            .expect("a free name");
+        drop(claim);
+        std::fs::rename(run_dir, &aside).map_err(|e| TrainError::Io {
+            path: run_dir.into(),
+            message: format!("cannot move the previous run aside to {}: {e}", aside.display()),
+        })?;
+        log::warn!("{}: the previous run was moved aside to {}", run_dir.display(), aside.display());
+        Self::acquire(run_dir)
+    }
+}
+
 /// The newest checkpoint of a run directory (from `checkpoints/latest`), or `path` itself if it is
 /// a checkpoint directory.
 pub fn find_checkpoint(path: &Path) -> Result<PathBuf, TrainError> {
@@ -548,6 +609,42 @@ mod tests {
         drop(first);
         let again = RunDirLock::acquire(&dir).unwrap();
         drop(again);
+    }
+
+    #[test]
+    fn a_new_run_never_overwrites_a_run_directory_that_holds_a_run() {
+        let root = crate::scratch::Scratch::new("run_new");
+        let dir = root.join("run");
+        // Empty, or holding only a launch script's config.json: a new run may start there.
+        drop(RunDirLock::acquire_new(&dir, false).unwrap());
+        std::fs::write(dir.join("config.json"), "{}").unwrap();
+        drop(RunDirLock::acquire_new(&dir, false).unwrap());
+        // Metrics or checkpoints: refused, naming what is there and the ways out.
+        std::fs::write(dir.join("metrics.csv"), "global_step,wall_time,name,value\n").unwrap();
+        std::fs::create_dir_all(dir.join("checkpoints")).unwrap();
+        let e = RunDirLock::acquire_new(&dir, false).unwrap_err().to_string();
+        assert!(e.contains(&*dir.to_string_lossy()) && e.contains("holds a run already (metrics.csv, checkpoints)"), "{e}");
+        assert!(e.contains("--resume") && e.contains("--run-dir") && e.contains("--force"), "{e}");
+        assert!(dir.join("metrics.csv").is_file(), "the refused run touched nothing");
+        // Resuming that run in its own directory is allowed; a new run from another run's
+        // checkpoint is not.
+        let ck = dir.join("checkpoints").join("step_0000010");
+        std::fs::create_dir_all(&ck).unwrap();
+        std::fs::write(ck.join("manifest.json"), "{}").unwrap();
+        drop(RunDirLock::acquire_for(&dir, Some(&ck), false).unwrap());
+        drop(RunDirLock::acquire_for(&dir, Some(&dir), false).unwrap());
+        let other = root.join("other");
+        std::fs::create_dir_all(other.join("checkpoints")).unwrap();
+        assert!(RunDirLock::acquire_for(&other, Some(&ck), false).is_err());
+        // --force moves the old run aside, whole, and starts in an empty directory.
+        let claim = RunDirLock::acquire_new(&dir, true).unwrap();
+        assert!(root.join("run.old-1").join("metrics.csv").is_file());
+        assert!(root.join("run.old-1").join("checkpoints").join("step_0000010").is_dir());
+        assert!(!dir.join("metrics.csv").exists() && !dir.join("checkpoints").exists());
+        drop(claim);
+        std::fs::write(dir.join("metrics.csv"), "").unwrap();
+        drop(RunDirLock::acquire_new(&dir, true).unwrap());
+        assert!(root.join("run.old-2").join("metrics.csv").is_file(), "the next free name");
     }
 
     #[test]
