@@ -267,7 +267,18 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
                 }
                 Err(r) => match lockstep.as_mut() {
                     Some(ls) => log_refused(ls.episode(r), &mut refused),
-                    None => ingest_episode(&mut ingest, &r, &mut queue, &mut metrics, st.global_step, wall(&started))?,
+                    None => {
+                        let starts = cfg.training_starts.max(1);
+                        let before = known.1 + queue.len();
+                        ingest_episode(&mut ingest, &r, &mut queue, &mut metrics, st.global_step, wall(&started))?;
+                        // Demos released by this result can be what brings the replay to
+                        // `training_starts`. The transitions that came before owed no update, and
+                        // the policies, held by `--max-lead` until the trainer updates, may send no
+                        // more: one update is owed then, or the run would wait for the idle timeout.
+                        if before < starts && known.1 + queue.len() >= starts && owed == 0 {
+                            owed = 1;
+                        }
+                    }
                 },
             }
         }
