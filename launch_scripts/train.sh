@@ -68,7 +68,9 @@ eqa_bin
 bin=$EQUIARM_BIN
 
 # Never overwrite a run: a directory holding one is refused, or moved aside with --force (a
-# `-- --resume` of that run continues in it: the trainer checks that).
+# `-- --resume` of that run continues in it: the trainer checks that). What holds a run is the
+# trainer's list (`equiarm_sac::train::RUN_FILES`) plus the bag, which this script's recorder
+# writes before the trainer starts, so the check has to happen here, before anything is written.
 held=()
 if [[ " ${extra[*]} " != *" --resume "* ]]; then
   for f in metrics.csv metrics.jsonl evals.json checkpoints bag; do [ -e "$run_dir/$f" ] && held+=("$f"); done

@@ -508,12 +508,7 @@ impl RunDirLock {
         file.set_len(0).and_then(|_| writeln!(file, "{}", std::process::id())).map_err(|e| io(&path, e.to_string()))?;
         Ok(RunDirLock { _file: file })
     }
-}
 
-/// What a run leaves in its directory that a new run there would overwrite or mix with its own.
-pub const RUN_FILES: [&str; 4] = ["metrics.csv", "metrics.jsonl", "evals.json", "checkpoints"];
-
-impl RunDirLock {
     /// Claim `run_dir` for a run that starts there: a new run ([`RunDirLock::acquire_new`]), or
     /// one that resumes `resume` in its own run directory, which may hold that run.
     pub fn acquire_for(run_dir: &Path, resume: Option<&Path>, force: bool) -> Result<Self, TrainError> {
@@ -560,6 +555,9 @@ impl RunDirLock {
         Self::acquire(run_dir)
     }
 }
+
+/// What a run leaves in its directory that a new run there would overwrite or mix with its own.
+pub const RUN_FILES: [&str; 4] = ["metrics.csv", "metrics.jsonl", "evals.json", "checkpoints"];
 
 /// The newest checkpoint of a run directory (from `checkpoints/latest`), or `path` itself if it is
 /// a checkpoint directory.
