@@ -5,7 +5,7 @@
 //! hidden 64, batch 128, 5 envs, 5,000 updates; 10,000 for block in bowl),
 //! [`TrainConfig::reduced`] (the same algorithm on a 2-core CPU: smaller frames and networks,
 //! fewer updates and evaluation episodes; see its doc for every difference), and
-//! [`TrainConfig::reduced16`] (those frames at hidden 16 and the paper's update count: where Equi
+//! [`TrainConfig::reduced16`] (those frames at hidden 16 and 1.5 times the paper's update count: where Equi
 //! reaches the paper's 0.8 on a CPU).
 
 use serde::{Deserialize, Serialize};
@@ -145,19 +145,22 @@ impl TrainConfig {
         }
     }
 
-    /// [`TrainConfig::reduced`]'s frames and batch with hidden 16, Adam 3e-3 and the paper's
-    /// update count (5,000; 10,000 for block in bowl). The CPU config at which Equi SAC does what
-    /// the paper reports on block pulling (≥ 0.8 evaluation success, ahead of CNN SAC); the
-    /// figures per seed and the run times are in `docs/experiments/learning.md`. An Equi update
-    /// takes about 0.4 s at one thread and 0.2 s at two on the default build (about 30 min of
-    /// training for a run on 2 cores). The default preset ([`TrainConfig::DEFAULT_PRESET`]), the
-    /// main job's. Only block pulling has been run at this preset.
+    /// [`TrainConfig::reduced`]'s frames and batch with hidden 16, Adam 3e-3 and 1.5 times the
+    /// paper's update count (7,500; 15,000 for block in bowl). The CPU config at which Equi SAC
+    /// does what the paper reports on block pulling (≥ 0.8 evaluation success, ahead of CNN SAC).
+    /// At the paper's 5,000 updates the in-process loop ends at 0.86 but the suite over DDS, whose
+    /// policies act on slightly older weights, at 0.75–0.80, too close to 0.8 for a 20-episode
+    /// evaluation; the extra 2,500 updates are for that. The figures per seed and the run times
+    /// are in `docs/experiments/learning.md`. An Equi update takes about 0.45 s at one thread and
+    /// 0.23 s at two on the default build (about 45 min of training for a run on 2 cores). The
+    /// default preset ([`TrainConfig::DEFAULT_PRESET`]), the main job's. Only block pulling has
+    /// been run at this preset.
     pub fn reduced16(task: &str) -> Self {
         let paper = TrainConfig::paper(task);
         let reduced = TrainConfig::reduced(task);
         TrainConfig {
             agent: AgentConfig { hidden: 16, lr: 3e-3, ..reduced.agent },
-            total_updates: paper.total_updates,
+            total_updates: paper.total_updates * 3 / 2,
             ..reduced
         }
     }
@@ -251,7 +254,7 @@ mod tests {
         assert_eq!(TrainConfig::paper("block_in_bowl").total_updates, 10_000);
         // reduced16 differs from reduced in exactly hidden, lr and the update count.
         let (r, r16) = (TrainConfig::reduced("block_pulling"), TrainConfig::reduced16("block_pulling"));
-        assert_eq!((r16.agent.hidden, r16.agent.lr, r16.total_updates), (16, 3e-3, 5_000));
+        assert_eq!((r16.agent.hidden, r16.agent.lr, r16.total_updates), (16, 3e-3, 7_500));
         let back = TrainConfig { agent: AgentConfig { hidden: r.agent.hidden, lr: r.agent.lr, ..r16.agent.clone() }, total_updates: r.total_updates, ..r16 };
         assert_eq!(back, r);
         for name in ["reduced", "reduced16", "paper"] {
