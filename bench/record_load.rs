@@ -103,12 +103,24 @@ fn main() {
         .unwrap();
     let disk: u64 = std::fs::read_dir(&bag).unwrap().map(|e| e.unwrap().metadata().unwrap().len()).sum();
     let (p, r): (u64, u64) = (published.iter().sum(), recorded.iter().sum());
-    println!("recorder load: {envs} envs x {hz} Hz x {secs} s of 152x152 RGBD Observations ({:.1} MB/s offered)",
-        envs as f64 * hz * 161_929.0 / 1e6);
+    println!(
+        "recorder load: {envs} envs x {hz} Hz x {secs} s of 152x152 RGBD Observations ({:.1} MB/s offered)",
+        envs as f64 * hz * 161_929.0 / 1e6
+    );
     for e in 0..envs {
-        println!("  /env{e}/observation: published {:>6}, recorded {:>6}, dropped {}", published[e], recorded[e], published[e] as i64 - recorded[e] as i64);
+        println!(
+            "  /env{e}/observation: published {:>6}, recorded {:>6}, dropped {}",
+            published[e],
+            recorded[e],
+            published[e] as i64 - recorded[e] as i64
+        );
     }
-    println!("total: published {p}, recorded {r}, dropped {}; {:.1} MB of CDR, {:.1} MB on disk (zstd)", p as i64 - r as i64, bytes as f64 / 1e6, disk as f64 / 1e6);
+    println!(
+        "total: published {p}, recorded {r}, dropped {}; {:.1} MB of CDR, {:.1} MB on disk (zstd)",
+        p as i64 - r as i64,
+        bytes as f64 / 1e6,
+        disk as f64 / 1e6
+    );
     println!("recorder peak RSS: {rss:.0} MB (budget 300 MB)");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -34,7 +34,8 @@ fn vm_kib(pid: u32, key: &str) -> Option<u64> {
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let camera = args.iter().any(|a| a == "--camera");
-    let delay_ms: u64 = args.iter().find_map(|a| a.strip_prefix("--delay-ms=")).map(|s| s.parse()).transpose()?.unwrap_or(0);
+    let delay_ms: u64 =
+        args.iter().find_map(|a| a.strip_prefix("--delay-ms=")).map(|s| s.parse()).transpose()?.unwrap_or(0);
     let pos: Vec<&String> = args.iter().filter(|a| !a.starts_with("--")).collect();
     let steps: u64 = pos.first().map(|s| s.parse()).transpose()?.unwrap_or(500);
     let task = pos.get(1).map(|s| s.as_str()).unwrap_or("block_picking");

@@ -40,9 +40,10 @@ fn main() {
     for spec in specs.values() {
         for f in &spec.fields {
             if let Base::Msg(full) = &f.base
-                && !specs.contains_key(full) {
-                    fail(&spec.path, f.line, &format!("unknown message type '{full}'"));
-                }
+                && !specs.contains_key(full)
+            {
+                fail(&spec.path, f.line, &format!("unknown message type '{full}'"));
+            }
         }
     }
     let code = generate(&specs);
@@ -240,14 +241,19 @@ fn parse(package: &str, name: &str, text: &str, path: &Path) -> Spec {
         let (base_str, array) = match ty.find('[') {
             None => (ty, Array::None),
             Some(k) => {
-                let inner = ty[k + 1..].strip_suffix(']').unwrap_or_else(|| fail(path, line_no, &format!("bad array type '{ty}'")));
+                let inner = ty[k + 1..]
+                    .strip_suffix(']')
+                    .unwrap_or_else(|| fail(path, line_no, &format!("bad array type '{ty}'")));
                 let array = if inner.is_empty() || inner.starts_with("<=") {
                     if let Some(b) = inner.strip_prefix("<=") {
-                        b.parse::<usize>().unwrap_or_else(|_| fail(path, line_no, &format!("bad array bound in '{ty}'")));
+                        b.parse::<usize>()
+                            .unwrap_or_else(|_| fail(path, line_no, &format!("bad array bound in '{ty}'")));
                     }
                     Array::Unbounded
                 } else {
-                    let n = inner.parse::<usize>().unwrap_or_else(|_| fail(path, line_no, &format!("bad array size in '{ty}'")));
+                    let n = inner
+                        .parse::<usize>()
+                        .unwrap_or_else(|_| fail(path, line_no, &format!("bad array size in '{ty}'")));
                     if n == 0 || n > 32 {
                         fail(path, line_no, &format!("fixed array size {n} in '{ty}' is not in 1..=32"));
                     }
@@ -282,9 +288,9 @@ fn parse(package: &str, name: &str, text: &str, path: &Path) -> Spec {
 
 const RUST_KEYWORDS: &[&str] = &[
     "as", "break", "const", "continue", "crate", "else", "enum", "extern", "false", "fn", "for", "if", "impl", "in",
-    "let", "loop", "match", "mod", "move", "mut", "pub", "ref", "return", "self", "static", "struct", "super",
-    "trait", "true", "type", "unsafe", "use", "where", "while", "async", "await", "dyn", "abstract", "become",
-    "box", "do", "final", "macro", "override", "priv", "typeof", "unsized", "virtual", "yield", "try", "gen",
+    "let", "loop", "match", "mod", "move", "mut", "pub", "ref", "return", "self", "static", "struct", "super", "trait",
+    "true", "type", "unsafe", "use", "where", "while", "async", "await", "dyn", "abstract", "become", "box", "do",
+    "final", "macro", "override", "priv", "typeof", "unsized", "virtual", "yield", "try", "gen",
 ];
 
 fn rust_ident(name: &str) -> String {
@@ -358,7 +364,8 @@ fn generate(specs: &BTreeMap<String, Spec>) -> String {
             out.push_str("    #[derive(Clone, Debug, Default, PartialEq, ::serde::Serialize, ::serde::Deserialize)]\n");
             let _ = writeln!(out, "    pub struct {} {{", s.name);
             for f in &s.fields {
-                let fdoc = if f.doc.is_empty() { format!("`{}`", f.msg_type) } else { format!("`{}`: {}", f.msg_type, f.doc) };
+                let fdoc =
+                    if f.doc.is_empty() { format!("`{}`", f.msg_type) } else { format!("`{}`: {}", f.msg_type, f.doc) };
                 doc_attr(&mut out, "        ", &fdoc);
                 if matches!(f.base, Base::Prim("u8")) && f.array == Array::Unbounded {
                     out.push_str("        #[serde(with = \"serde_bytes\")]\n");
@@ -379,8 +386,13 @@ fn generate(specs: &BTreeMap<String, Spec>) -> String {
             let _ = writeln!(out, "    impl crate::RosMessage for {} {{", s.name);
             let _ = writeln!(out, "        const PACKAGE: &'static str = {:?};", s.package);
             let _ = writeln!(out, "        const NAME: &'static str = {:?};", s.name);
-            let _ = writeln!(out, "        const TYPE_NAME: &'static str = {:?};", format!("{}/msg/{}", s.package, s.name));
-            let _ = writeln!(out, "        const DDS_TYPE_NAME: &'static str = {:?};", format!("{}::msg::dds_::{}_", s.package, s.name));
+            let _ =
+                writeln!(out, "        const TYPE_NAME: &'static str = {:?};", format!("{}/msg/{}", s.package, s.name));
+            let _ = writeln!(
+                out,
+                "        const DDS_TYPE_NAME: &'static str = {:?};",
+                format!("{}::msg::dds_::{}_", s.package, s.name)
+            );
             let _ = writeln!(out, "        const MSG_TEXT: &'static str = {:?};", s.text);
             let _ = writeln!(out, "        const DEFINITION: &'static str = {:?};", full_definition(specs, s));
             out.push_str("    }\n");

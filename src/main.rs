@@ -286,7 +286,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let mut topics = Vec::new();
             for t in &a.topics {
                 let Some((name, ty)) = t.split_once(':') else {
-                    bail!("topic '{t}' must be given as TOPIC:TYPE, e.g. /env0/observation:equiarm_msgs/msg/Observation");
+                    bail!(
+                        "topic '{t}' must be given as TOPIC:TYPE, e.g. /env0/observation:equiarm_msgs/msg/Observation"
+                    );
                 };
                 topics.push((name.to_string(), ty.to_string()));
             }
@@ -313,7 +315,17 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let opts = RosOptions::from_env()?;
             runtime()?.block_on(equiarm_nodes::recorder::run(&opts, cfg))?;
         }
-        Command::Nn(NnCommand::CheckEquivariance { checkpoint, fresh, net, config, hidden, size, channels, batch, seed }) => {
+        Command::Nn(NnCommand::CheckEquivariance {
+            checkpoint,
+            fresh,
+            net,
+            config,
+            hidden,
+            size,
+            channels,
+            batch,
+            seed,
+        }) => {
             use equiarm_nn::nets::NetConfig;
             let kind: equiarm_nn::diagnostics::NetKind = net.parse().map_err(anyhow::Error::msg)?;
             let mut cfg = match (config.as_str(), kind) {
@@ -329,8 +341,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 bail!("give a checkpoint file, or --fresh to check the seeded initial weights");
             }
             let device = equiarm_nn::burn::tensor::Device::flex();
-            let errors = equiarm_nn::diagnostics::check_checkpoint(kind, &cfg, checkpoint.as_deref(), batch, seed, &device)
-                .with_context(|| format!("checking the equivariance of {net} ({config} config)"))?;
+            let errors =
+                equiarm_nn::diagnostics::check_checkpoint(kind, &cfg, checkpoint.as_deref(), batch, seed, &device)
+                    .with_context(|| format!("checking the equivariance of {net} ({config} config)"))?;
             println!("element (flip, rot)   relative error");
             for e in errors {
                 println!("({}, {})                {:.3e}", e.element.flip, e.element.rot, e.relative_error);
@@ -360,15 +373,23 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 .with_context(|| format!("evaluating {} on {}", ckpt.display(), bag.display()))?;
             if json {
                 let dims: Vec<_> = (0..5)
-                    .map(|d| serde_json::json!({"dim": equiarm_nodes::policy_eval::DIMS[d], "mae": a.mae[d],
-                        "sign_agreement": a.sign[d], "correlation": a.corr[d]}))
+                    .map(|d| {
+                        serde_json::json!({"dim": equiarm_nodes::policy_eval::DIMS[d], "mae": a.mae[d],
+                        "sign_agreement": a.sign[d], "correlation": a.corr[d]})
+                    })
                     .collect();
                 println!("{}", serde_json::json!({"transitions": a.n, "dims": dims}));
             } else {
                 println!("{} transitions; policy (tanh of mean) vs recorded action, normalised units", a.n);
                 println!("{:<8} {:>10} {:>14} {:>12}", "dim", "mean |d|", "same sign", "correlation");
                 for d in 0..5 {
-                    println!("{:<8} {:>10.4} {:>14.3} {:>12.3}", equiarm_nodes::policy_eval::DIMS[d], a.mae[d], a.sign[d], a.corr[d]);
+                    println!(
+                        "{:<8} {:>10.4} {:>14.3} {:>12.3}",
+                        equiarm_nodes::policy_eval::DIMS[d],
+                        a.mae[d],
+                        a.sign[d],
+                        a.corr[d]
+                    );
                 }
             }
         }

@@ -56,7 +56,12 @@ struct Stream {
 
 fn streams() -> Vec<Stream> {
     fn s<M: RosMessage>(topic: &'static str, qos: OfferedQos, count: u32, f: fn(u32) -> M) -> Stream {
-        Stream { topic, info: TopicInfo::of::<M>(topic, &[qos]), count, make: Box::new(move |k| cdr::encode(&f(k)).unwrap()) }
+        Stream {
+            topic,
+            info: TopicInfo::of::<M>(topic, &[qos]),
+            count,
+            make: Box::new(move |k| cdr::encode(&f(k)).unwrap()),
+        }
     }
     vec![
         s("/env0/gripper_cmd", OfferedQos::reliable(10), 40, gripper),

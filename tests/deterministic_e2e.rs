@@ -29,9 +29,30 @@ fn bin() -> &'static str {
 fn train_sh(domain: u32, run_dir: &Path, seed: u64) -> Command {
     let mut c = Command::new("bash");
     c.arg(support::repo().join("launch_scripts/train.sh"))
-        .args(["--deterministic", "--num-envs", "2", "--seed", &seed.to_string(), "--total-updates", &UPDATES.to_string(), "--run-dir"])
+        .args([
+            "--deterministic",
+            "--num-envs",
+            "2",
+            "--seed",
+            &seed.to_string(),
+            "--total-updates",
+            &UPDATES.to_string(),
+            "--run-dir",
+        ])
         .arg(run_dir)
-        .args(["--", "--image", "19:16", "--hidden", "8", "--batch-size", "16", "--demo-episodes", "2", "--training-starts", "20"])
+        .args([
+            "--",
+            "--image",
+            "19:16",
+            "--hidden",
+            "8",
+            "--batch-size",
+            "16",
+            "--demo-episodes",
+            "2",
+            "--training-starts",
+            "20",
+        ])
         .env("EQUIARM_BIN", bin())
         .env("ROS_DOMAIN_ID", domain.to_string())
         // the nodes' default log filter, as a user gets it
@@ -61,7 +82,8 @@ fn transitions(bag: &Path) -> BTreeMap<(String, u64), Vec<u8>> {
     reader
         .for_each(ReadMode::Strict, |m| {
             if m.topic == "/transitions" && m.type_name == Transition::TYPE_NAME {
-                let t: Transition = cdr::decode(m.data).map_err(|e| format!("a /transitions payload does not decode: {e}"))?;
+                let t: Transition =
+                    cdr::decode(m.data).map_err(|e| format!("a /transitions payload does not decode: {e}"))?;
                 if t.obs.env != "eval" && out.insert((t.obs.env.clone(), t.obs.seq), m.data.to_vec()).is_some() {
                     return Err(format!("transition {} seq {} recorded twice", t.obs.env, t.obs.seq));
                 }
@@ -77,7 +99,9 @@ fn transitions(bag: &Path) -> BTreeMap<(String, u64), Vec<u8>> {
 fn digest(stream: &BTreeMap<(String, u64), Vec<u8>>) -> u64 {
     let mut h = 0xcbf2_9ce4_8422_2325u64;
     for ((env, seq), data) in stream {
-        for b in env.bytes().chain(seq.to_le_bytes()).chain((data.len() as u64).to_le_bytes()).chain(data.iter().copied()) {
+        for b in
+            env.bytes().chain(seq.to_le_bytes()).chain((data.len() as u64).to_le_bytes()).chain(data.iter().copied())
+        {
             h = (h ^ b as u64).wrapping_mul(0x0100_0000_01b3);
         }
     }
@@ -119,7 +143,11 @@ fn checked_stream(name: &str, run_dir: &Path) -> BTreeMap<(String, u64), Vec<u8>
     let r = rounds(run_dir);
     assert!(r > UPDATES, "{name}: {r} rounds for {UPDATES} updates (one update per round once the replay is ready)");
     let counts = per_env(&stream);
-    assert_eq!(counts, BTreeMap::from([("env0", r), ("env1", r)]), "{name}: every env records exactly one transition per round");
+    assert_eq!(
+        counts,
+        BTreeMap::from([("env0", r), ("env1", r)]),
+        "{name}: every env records exactly one transition per round"
+    );
     for p in ["policy0", "policy1"] {
         let l = log(run_dir, p);
         assert!(!l.contains("lock-step broken"), "{name}/{p}:\n{l}");

@@ -160,7 +160,11 @@ fn cdr_bytes_equal_cyclonedds_and_rosbags_and_decode_both_ways() {
         let theirs = std::fs::read(dir.join("py").join(format!("{name}.cdr"))).unwrap();
         if ours != theirs {
             let at = ours.iter().zip(&theirs).position(|(a, b)| a != b).unwrap_or(ours.len().min(theirs.len()));
-            failures.push(format!("{name}: our {} bytes differ from Cyclone's {} at byte {at}", ours.len(), theirs.len()));
+            failures.push(format!(
+                "{name}: our {} bytes differ from Cyclone's {} at byte {at}",
+                ours.len(),
+                theirs.len()
+            ));
         }
         // Decoding their bytes and encoding again gives their bytes back: since encoding is injective,
         // the decoded value equals the case bit for bit (the first check pins the encoder).

@@ -15,8 +15,8 @@ use std::time::{Duration, Instant};
 use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, PolicyWeights, Transition};
 use equiarm_msgs::sensor_msgs::Image;
 use equiarm_msgs::std_msgs::Header;
-use equiarm_nodes::policy::{Policy, PolicyMode, WeightsOutcome};
 use equiarm_nodes::ingest::Ingest;
+use equiarm_nodes::policy::{Policy, PolicyMode, WeightsOutcome};
 use equiarm_sac::agent::{Agent, AgentConfig, ModelKind};
 use equiarm_sac::config::TrainConfig;
 
@@ -106,7 +106,9 @@ impl Drop for Node {
 /// The numbers after `prefix` on the log's lines, e.g. every N of `weights version N`.
 fn numbers_after(log: &str, prefix: &str) -> Vec<u64> {
     log.match_indices(prefix)
-        .filter_map(|(i, _)| log[i + prefix.len()..].chars().take_while(|c| c.is_ascii_digit()).collect::<String>().parse().ok())
+        .filter_map(|(i, _)| {
+            log[i + prefix.len()..].chars().take_while(|c| c.is_ascii_digit()).collect::<String>().parse().ok()
+        })
         .collect()
 }
 
@@ -116,8 +118,18 @@ fn two_sim_policy_pairs_train_one_trainer_over_dds_without_losing_a_transition()
     let run_dir = support::scratch("learn_dds_run");
     let run = run_dir.to_str().unwrap();
     let net = ["--image", "19:16", "--hidden", "8"];
-    let mut trainer_args = vec!["train", "--run-dir", run, "--batch-size", "16", "--num-envs", "2", "--demo-episodes", "0"];
-    trainer_args.extend(["--eval-every", "0", "--weights-every", "5", "--total-updates", "100000", "--training-starts", "20"]);
+    let mut trainer_args =
+        vec!["train", "--run-dir", run, "--batch-size", "16", "--num-envs", "2", "--demo-episodes", "0"];
+    trainer_args.extend([
+        "--eval-every",
+        "0",
+        "--weights-every",
+        "5",
+        "--total-updates",
+        "100000",
+        "--training-starts",
+        "20",
+    ]);
     trainer_args.extend(["--idle-timeout-s", "120", "--quiet"]);
     trainer_args.extend(net);
     let mut trainer = Node::spawn(DOMAIN, "trainer", &trainer_args);
@@ -136,7 +148,11 @@ fn two_sim_policy_pairs_train_one_trainer_over_dds_without_losing_a_transition()
             let (ns, seed) = (format!("/env{i}"), (i + 1).to_string());
             let a = ["sim", "--namespace", &ns, "--task", "block_pulling", "--seed", &seed, "--resolution", "19"];
             // 5 episodes of at most 50 steps: 200 steps and more even when a few end early
-            Node::spawn(DOMAIN, &format!("sim {ns}"), &[&a[..], &["--episodes", "5", "--timeout-ms", "300"][..]].concat())
+            Node::spawn(
+                DOMAIN,
+                &format!("sim {ns}"),
+                &[&a[..], &["--episodes", "5", "--timeout-ms", "300"][..]].concat(),
+            )
         })
         .collect();
 
@@ -154,14 +170,19 @@ fn two_sim_policy_pairs_train_one_trainer_over_dds_without_losing_a_transition()
     assert!(published >= 200, "only {published} env steps");
     // Both policies acted with the trainer's weights after its first update (version 2 and later).
     for p in &policies {
-        p.wait_log("weights version >= 2", Duration::from_secs(60), |l| numbers_after(l, "weights version ").iter().any(|&v| v >= 2));
+        p.wait_log("weights version >= 2", Duration::from_secs(60), |l| {
+            numbers_after(l, "weights version ").iter().any(|&v| v >= 2)
+        });
     }
 
     trainer.sigint();
     let log = trainer.wait_ok(Duration::from_secs(60));
     let received = numbers_after(&log, "received ");
     assert_eq!(received, vec![published], "transitions published by the sims vs received by the trainer:\n{log}");
-    assert!(log.contains(&format!("received {published} transitions (stored {published}, expert held 0, eval 0)")), "{log}");
+    assert!(
+        log.contains(&format!("received {published} transitions (stored {published}, expert held 0, eval 0)")),
+        "{log}"
+    );
     assert!(log.contains("stopping (signal)"), "{log}");
     let latest = std::fs::read_to_string(run_dir.join("checkpoints/latest")).expect("no checkpoints/latest");
     let ck = run_dir.join("checkpoints").join(latest.trim());
@@ -169,7 +190,10 @@ fn two_sim_policy_pairs_train_one_trainer_over_dds_without_losing_a_transition()
         assert!(ck.join(f).is_file(), "{} lacks {f}", ck.display());
     }
     let manifest = equiarm_sac::learner::read_manifest(&ck).unwrap();
-    assert_eq!((manifest.replay_len as u64, manifest.config.agent.hidden, manifest.config.image_size), (published, 8, 19));
+    assert_eq!(
+        (manifest.replay_len as u64, manifest.config.agent.hidden, manifest.config.image_size),
+        (published, 8, 19)
+    );
     assert!(manifest.updates >= 1 && run_dir.join("metrics.csv").is_file());
 
     for p in &mut policies {
@@ -188,15 +212,51 @@ fn an_expert_pair_feeds_successful_demos_and_the_trainer_stops_at_total_updates_
     let run_dir = support::scratch("learn_dds_expert");
     let run = run_dir.to_str().unwrap();
     let trainer_args = |total: &'static str| {
-        let mut a = vec!["train", "--run-dir", run, "--batch-size", "8", "--num-envs", "1", "--demo-episodes", "0", "--eval-every", "0"];
-        a.extend(["--weights-every", "2", "--training-starts", "8", "--checkpoint-every", "0", "--quiet", "--image", "19:16", "--hidden", "8"]);
+        let mut a = vec![
+            "train",
+            "--run-dir",
+            run,
+            "--batch-size",
+            "8",
+            "--num-envs",
+            "1",
+            "--demo-episodes",
+            "0",
+            "--eval-every",
+            "0",
+        ];
+        a.extend([
+            "--weights-every",
+            "2",
+            "--training-starts",
+            "8",
+            "--checkpoint-every",
+            "0",
+            "--quiet",
+            "--image",
+            "19:16",
+            "--hidden",
+            "8",
+        ]);
         a.extend(["--total-updates", total]);
         a
     };
     let mut trainer = Node::spawn(DOMAIN, "trainer", &trainer_args("3"));
     trainer.wait_log("start", Duration::from_secs(60), |l| l.contains("waiting for transitions"));
     let mut policy = Node::spawn(DOMAIN, "expert policy", &["policy", "--namespace", "/env0", "--mode", "expert"]);
-    let sim_args = ["sim", "--namespace", "/env0", "--task", "block_pulling", "--seed", "3", "--resolution", "19", "--timeout-ms", "300"];
+    let sim_args = [
+        "sim",
+        "--namespace",
+        "/env0",
+        "--task",
+        "block_pulling",
+        "--seed",
+        "3",
+        "--resolution",
+        "19",
+        "--timeout-ms",
+        "300",
+    ];
     let mut sim = Node::spawn(DOMAIN, "sim", &sim_args);
 
     // Only successful expert episodes reach the replay; the trainer exits by itself after 3 updates.
@@ -231,13 +291,26 @@ fn observation(env: &str, episode: u32, seq: u64, shade: u8) -> Observation {
     let n = (SIZE * SIZE) as usize;
     let color = Image::rgb8(Header::default(), SIZE, SIZE, vec![shade; n * 3]).unwrap();
     let depth = Image::float32(Header::default(), SIZE, SIZE, &vec![0.5 + shade as f32 / 1000.0; n]).unwrap();
-    let expert_action = GripperCommand { obs_seq: seq, open_ratio: 1.0, dx: 0.01, source: GripperCommand::SOURCE_EXPERT, ..Default::default() };
+    let expert_action = GripperCommand {
+        obs_seq: seq,
+        open_ratio: 1.0,
+        dx: 0.01,
+        source: GripperCommand::SOURCE_EXPERT,
+        ..Default::default()
+    };
     Observation { seq, env: env.into(), episode, step: seq as u32, color, depth, expert_action, ..Default::default() }
 }
 
 fn transition(env: &str, episode: u32, seq: u64, expert: bool, last: bool) -> Transition {
-    let (obs, next_obs) = (observation(env, episode, seq, seq as u8), observation(env, episode, seq + 1, seq as u8 + 1));
-    let action = GripperCommand { obs_seq: seq, open_ratio: 1.0, dx: 0.05, dtheta: -std::f32::consts::FRAC_PI_4, ..Default::default() };
+    let (obs, next_obs) =
+        (observation(env, episode, seq, seq as u8), observation(env, episode, seq + 1, seq as u8 + 1));
+    let action = GripperCommand {
+        obs_seq: seq,
+        open_ratio: 1.0,
+        dx: 0.05,
+        dtheta: -std::f32::consts::FRAC_PI_4,
+        ..Default::default()
+    };
     Transition { obs, next_obs, action, reward: last as u8 as f32, done: last, expert, ..Default::default() }
 }
 
@@ -288,7 +361,14 @@ fn the_policy_refuses_foreign_weights_and_answers_a_repeated_seq_identically() {
     let arch = AgentConfig { model: ModelKind::Equi, hidden: 8, input_size: 16, ..AgentConfig::default() };
     let mut policy = Policy::new(PolicyMode::Sample, arch.clone(), SIZE as usize, None, 7).unwrap();
     let data = Agent::new(arch, 99).unwrap().actor_bytes().unwrap();
-    let weights = |version, model: &str, format: &str, data: Vec<u8>| PolicyWeights { version, updates: 3, model: model.into(), format: format.into(), data, ..Default::default() };
+    let weights = |version, model: &str, format: &str, data: Vec<u8>| PolicyWeights {
+        version,
+        updates: 3,
+        model: model.into(),
+        format: format.into(),
+        data,
+        ..Default::default()
+    };
 
     let o = policy.on_weights(weights(5, "cnn", "safetensors", data.clone()));
     assert!(matches!(&o, WeightsOutcome::Refused(why) if why.contains("'cnn'")), "{o:?}");

@@ -29,7 +29,11 @@ fn a_saved_equivariant_actor_checks_equivariant_and_a_mismatched_one_fails_clear
     assert!(errors.iter().all(|e| *e < 1e-4), "{text}");
     assert!(errors[1..].iter().any(|e| *e > 0.0), "a non-trivial element has some float error:\n{text}");
 
-    let out = equiarm().args(["nn", "check-equivariance", "--config", "reduced", "--hidden", "24"]).arg(&file).output().unwrap();
+    let out = equiarm()
+        .args(["nn", "check-equivariance", "--config", "reduced", "--hidden", "24"])
+        .arg(&file)
+        .output()
+        .unwrap();
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8(out.stderr).unwrap();
     assert!(err.contains("actor.safetensors"), "{err}");
@@ -65,7 +69,9 @@ fn bag_eval_policy_measures_agreement_with_the_recorded_actions() {
     let obs: Vec<Observation> = (0..40u32)
         .map(|k| {
             let n = (side * side) as usize;
-            let rgb: Vec<u8> = (0..3 * n).map(|i| ((i as u32).wrapping_mul(2654435761) ^ (k * 40503)).rotate_left(k % 31) as u8).collect();
+            let rgb: Vec<u8> = (0..3 * n)
+                .map(|i| ((i as u32).wrapping_mul(2654435761) ^ (k * 40503)).rotate_left(k % 31) as u8)
+                .collect();
             let depth: Vec<f32> = (0..n).map(|i| 0.4 + ((i as u32 * 7 + k * 13) % 100) as f32 * 2e-3).collect();
             Observation {
                 seq: k as u64,

@@ -84,7 +84,8 @@ fn recorded_seqs(bag: &Path) -> Vec<u64> {
 
 fn python_counts(bag: &Path, counts: serde_json::Value, types: serde_json::Value) {
     let expected = bag.with_extension("expected.json");
-    std::fs::write(&expected, serde_json::json!({"counts": counts, "types": types, "values": null}).to_string()).unwrap();
+    std::fs::write(&expected, serde_json::json!({"counts": counts, "types": types, "values": null}).to_string())
+        .unwrap();
     let mut c = support::python_script("bag_check.py");
     c.arg(bag).arg(&expected);
     support::run_ok(c);
@@ -133,11 +134,8 @@ fn sigint_leaves_a_complete_bag_with_every_message_after_the_match() {
 fn sigkill_loses_at_most_half_a_second_and_recover_makes_a_readable_bag() {
     let dir = support::scratch("recorder_kill");
     let bag = dir.join("killed");
-    let mut rec = record(
-        82,
-        &bag,
-        &["/rec/gripper_cmd:equiarm_msgs/msg/GripperCommand", "/rec/image:sensor_msgs/msg/Image"],
-    );
+    let mut rec =
+        record(82, &bag, &["/rec/gripper_cmd:equiarm_msgs/msg/GripperCommand", "/rec/image:sensor_msgs/msg/Image"]);
     let rt = tokio::runtime::Runtime::new().unwrap();
     let (published_at_kill, rate_hz) = rt.block_on(async {
         let mut node = RosNode::new("/", "rec_pub", &RosOptions { domain_id: 82, localhost_only: false }).unwrap();
@@ -182,7 +180,9 @@ fn sigkill_loses_at_most_half_a_second_and_recover_makes_a_readable_bag() {
     assert_eq!(seqs, (seqs[0]..=last).collect::<Vec<_>>());
     let lost = published_at_kill - 1 - last;
     let lost_s = lost as f64 / rate_hz;
-    eprintln!("kill test: published {published_at_kill} before the kill at {rate_hz:.0} Hz, last recorded {last}: lost {lost} ({lost_s:.3} s)");
+    eprintln!(
+        "kill test: published {published_at_kill} before the kill at {rate_hz:.0} Hz, last recorded {last}: lost {lost} ({lost_s:.3} s)"
+    );
     assert!(lost_s <= 0.5, "lost {lost} messages = {lost_s:.3} s at {rate_hz:.0} Hz");
 
     let images = {
@@ -219,7 +219,8 @@ fn bag_play_republishes_every_message_in_order_on_remapped_topics() {
     }
     w.finish().unwrap();
 
-    let player = play(83, &bag, &["--rate", "2", "--wait-ms", "2000", "--remap", "/rec/gripper_cmd:/played/gripper_cmd"]);
+    let player =
+        play(83, &bag, &["--rate", "2", "--wait-ms", "2000", "--remap", "/rec/gripper_cmd:/played/gripper_cmd"]);
     let rt = tokio::runtime::Runtime::new().unwrap();
     let got = rt.block_on(async {
         let mut node = RosNode::new("/", "play_sub", &RosOptions { domain_id: 83, localhost_only: false }).unwrap();
@@ -253,7 +254,8 @@ fn bag_play_lockstep_waits_for_the_command_naming_each_observation() {
     }
     w.finish().unwrap();
 
-    let mut player = play(84, &bag, &["--lockstep", "300", "--wait-ms", "2000", "--remap", "/env0/observation:/ls/observation"]);
+    let mut player =
+        play(84, &bag, &["--lockstep", "300", "--wait-ms", "2000", "--remap", "/env0/observation:/ls/observation"]);
     let rt = tokio::runtime::Runtime::new().unwrap();
     let seen = rt.block_on(async {
         let mut node = RosNode::new("/", "policy", &RosOptions { domain_id: 84, localhost_only: false }).unwrap();

@@ -86,7 +86,8 @@ fn an_expert_driver_gets_a_successful_episode_with_consistent_transitions_and_ca
         let cmd_pub = n.publisher::<GripperCommand>("/st90/gripper_cmd", qos::command()).unwrap();
         let sim = Sim::spawn(DOMAIN, "/st90", &["--seed", "3", "--episodes", "1", "--timeout-ms", "300"]);
 
-        let (mut observations, mut transitions, mut colors, mut depths, mut infos) = (vec![], vec![], vec![], vec![], vec![]);
+        let (mut observations, mut transitions, mut colors, mut depths, mut infos) =
+            (vec![], vec![], vec![], vec![], vec![]);
         let mut result = None;
         let deadline = Instant::now() + Duration::from_secs(30);
         while result.is_none() && Instant::now() < deadline {
@@ -115,7 +116,12 @@ fn an_expert_driver_gets_a_successful_episode_with_consistent_transitions_and_ca
         assert!((r.discounted_return - 0.99f32.powi(r.steps as i32 - 1)).abs() < 1e-5, "{r:?}");
 
         // One Transition per step, in order, each obs answered by its action and followed by next_obs.
-        assert_eq!(transitions.len(), r.steps as usize, "{:?}", transitions.iter().map(|t| t.obs.seq).collect::<Vec<_>>());
+        assert_eq!(
+            transitions.len(),
+            r.steps as usize,
+            "{:?}",
+            transitions.iter().map(|t| t.obs.seq).collect::<Vec<_>>()
+        );
         for (k, t) in transitions.iter().enumerate() {
             assert_eq!((t.obs.step, t.next_obs.step), (k as u32, k as u32 + 1));
             assert_eq!((t.obs.seq, t.action.obs_seq, t.next_obs.seq), (k as u64, k as u64, k as u64 + 1));
@@ -140,11 +146,22 @@ fn an_expert_driver_gets_a_successful_episode_with_consistent_transitions_and_ca
         assert!(transitions.iter().any(|t| t.next_obs.holding), "the expert picked the block");
 
         // Camera topics: frames with the stamp of an observation (best effort: not every one arrives).
-        assert!(!colors.is_empty() && !depths.is_empty() && !infos.is_empty(), "{} {} {}", colors.len(), depths.len(), infos.len());
-        let stamps: Vec<_> = transitions.iter().flat_map(|t| [t.obs.header.stamp.clone(), t.next_obs.header.stamp.clone()]).collect();
+        assert!(
+            !colors.is_empty() && !depths.is_empty() && !infos.is_empty(),
+            "{} {} {}",
+            colors.len(),
+            depths.len(),
+            infos.len()
+        );
+        let stamps: Vec<_> =
+            transitions.iter().flat_map(|t| [t.obs.header.stamp.clone(), t.next_obs.header.stamp.clone()]).collect();
         for c in &colors {
             assert!(stamps.contains(&c.header.stamp), "colour frame stamp {:?} is no observation's", c.header.stamp);
-            let o = transitions.iter().flat_map(|t| [&t.obs, &t.next_obs]).find(|o| o.header.stamp == c.header.stamp).unwrap();
+            let o = transitions
+                .iter()
+                .flat_map(|t| [&t.obs, &t.next_obs])
+                .find(|o| o.header.stamp == c.header.stamp)
+                .unwrap();
             assert_eq!(c.data, o.color.data, "camera frame = observation colour");
         }
         for d in &depths {
@@ -215,5 +232,8 @@ fn stale_and_non_finite_commands_are_ignored_and_the_observation_is_republished(
     assert!(out.status.success(), "sim exited with {} on SIGTERM:\n{stderr}", out.status);
     assert!(stderr.contains("SIGTERM received"), "{stderr}");
     assert!(stderr.contains("rejecting the command for obs_seq 0: non-finite dx=NaN, dtheta=inf"), "{stderr}");
-    assert!(stderr.contains("steps: 1,") && stderr.contains("wrong_seq: 1,") && stderr.contains("rejected: 1 "), "{stderr}");
+    assert!(
+        stderr.contains("steps: 1,") && stderr.contains("wrong_seq: 1,") && stderr.contains("rejected: 1 "),
+        "{stderr}"
+    );
 }

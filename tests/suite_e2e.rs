@@ -98,14 +98,20 @@ fn train_sh_runs_the_suite_to_the_end() {
     assert!(received >= 20, "only {received} transitions reached the trainer");
     for p in ["policy0", "policy1"] {
         let l = log(&run_dir, p);
-        let newest = l.lines().filter_map(|x| x.split("weights version ").nth(1)?.split(' ').next()?.parse::<u64>().ok()).max();
+        let newest =
+            l.lines().filter_map(|x| x.split("weights version ").nth(1)?.split(' ').next()?.parse::<u64>().ok()).max();
         assert!(newest.unwrap_or(0) >= 2, "{p} never switched to broadcast weights:\n{l}");
     }
     assert!(run_dir.join("checkpoints/latest").is_file());
     assert!(run_dir.join("learning_curve.png").is_file());
     bag_opens(&run_dir.join("bag"));
     // The trained actor over the recorded transitions, its architecture from the run's manifest.
-    let ev = Command::new(bin()).args(["bag", "eval", "--json", "--policy"]).arg(&run_dir).arg(run_dir.join("bag")).output().unwrap();
+    let ev = Command::new(bin())
+        .args(["bag", "eval", "--json", "--policy"])
+        .arg(&run_dir)
+        .arg(run_dir.join("bag"))
+        .output()
+        .unwrap();
     assert!(ev.status.success(), "bag eval --policy RUN_DIR failed: {}", String::from_utf8_lossy(&ev.stderr));
     let v: serde_json::Value = serde_json::from_slice(&ev.stdout).expect("JSON");
     assert!(v["transitions"].as_u64().unwrap_or(0) > 0 && v["dims"].as_array().map_or(0, |d| d.len()) == 5, "{v}");
@@ -117,7 +123,8 @@ fn train_sh_runs_the_suite_to_the_end() {
 fn ctrl_c_stops_every_process_and_leaves_a_readable_bag() {
     let run_dir = support::scratch("suite-sigint");
     let _cleanup = KillOnPanic(106);
-    let mut child = train_sh(106, &run_dir, 100_000).process_group(0).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
+    let mut child =
+        train_sh(106, &run_dir, 100_000).process_group(0).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
     // Wait until the trainer has made updates (its checkpoints dir appears only later, so look at the log).
     let t0 = Instant::now();
     while !log(&run_dir, "policy0").contains("weights version 2") {

@@ -8,8 +8,18 @@ use crate::{sensor_msgs::Image, std_msgs::Header};
 pub enum ImageError {
     #[error("image encoding is '{found}', expected '{expected}'")]
     Encoding { expected: &'static str, found: String },
-    #[error("{encoding} image of {height}x{width} must have step {expected_step} and {expected_len} data bytes, has step {step} and {len}")]
-    Size { encoding: &'static str, height: u32, width: u32, expected_step: u64, expected_len: u64, step: u32, len: usize },
+    #[error(
+        "{encoding} image of {height}x{width} must have step {expected_step} and {expected_len} data bytes, has step {step} and {len}"
+    )]
+    Size {
+        encoding: &'static str,
+        height: u32,
+        width: u32,
+        expected_step: u64,
+        expected_len: u64,
+        step: u32,
+        len: usize,
+    },
     #[error("image is big-endian; only little-endian {0} is supported")]
     BigEndian(&'static str),
 }

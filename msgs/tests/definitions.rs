@@ -12,11 +12,8 @@ fn dir() -> &'static Path {
 #[test]
 fn cmake_lists_every_msg_file_and_nothing_else() {
     let cmake = std::fs::read_to_string(dir().join("CMakeLists.txt")).unwrap();
-    let mut listed: Vec<String> = cmake
-        .split('"')
-        .filter(|s| s.starts_with("msg/") && s.ends_with(".msg"))
-        .map(str::to_string)
-        .collect();
+    let mut listed: Vec<String> =
+        cmake.split('"').filter(|s| s.starts_with("msg/") && s.ends_with(".msg")).map(str::to_string).collect();
     listed.sort();
     let mut files: Vec<String> = std::fs::read_dir(dir().join("msg"))
         .unwrap()

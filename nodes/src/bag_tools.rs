@@ -37,13 +37,8 @@ pub fn info_text(path: &Path, info: &BagInfo) -> String {
     let _ = writeln!(s, "Messages:     {}", info.messages);
     let _ = writeln!(s, "Topics:");
     for (name, t) in &info.topics {
-        let _ = writeln!(
-            s,
-            "  {name:<40} {:<34} {:>8} msgs {:>10.1} KiB",
-            t.type_name,
-            t.count,
-            t.bytes as f64 / 1024.0
-        );
+        let _ =
+            writeln!(s, "  {name:<40} {:<34} {:>8} msgs {:>10.1} KiB", t.type_name, t.count, t.bytes as f64 / 1024.0);
     }
     s
 }

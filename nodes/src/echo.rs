@@ -91,17 +91,50 @@ macro_rules! with_message_type {
         let name: &str = $name;
         let full = equiarm_msgs::TypeInfo::find(name).map(|t| t.type_name);
         match full {
-            Some(equiarm_msgs::builtin_interfaces::Time::TYPE_NAME) => { type $M = equiarm_msgs::builtin_interfaces::Time; Ok($body) }
-            Some(equiarm_msgs::std_msgs::Header::TYPE_NAME) => { type $M = equiarm_msgs::std_msgs::Header; Ok($body) }
-            Some(equiarm_msgs::sensor_msgs::Image::TYPE_NAME) => { type $M = equiarm_msgs::sensor_msgs::Image; Ok($body) }
-            Some(equiarm_msgs::sensor_msgs::CameraInfo::TYPE_NAME) => { type $M = equiarm_msgs::sensor_msgs::CameraInfo; Ok($body) }
-            Some(equiarm_msgs::sensor_msgs::RegionOfInterest::TYPE_NAME) => { type $M = equiarm_msgs::sensor_msgs::RegionOfInterest; Ok($body) }
-            Some(equiarm_msgs::msg::GripperCommand::TYPE_NAME) => { type $M = equiarm_msgs::msg::GripperCommand; Ok($body) }
-            Some(equiarm_msgs::msg::Observation::TYPE_NAME) => { type $M = equiarm_msgs::msg::Observation; Ok($body) }
-            Some(equiarm_msgs::msg::Transition::TYPE_NAME) => { type $M = equiarm_msgs::msg::Transition; Ok($body) }
-            Some(equiarm_msgs::msg::EpisodeResult::TYPE_NAME) => { type $M = equiarm_msgs::msg::EpisodeResult; Ok($body) }
-            Some(equiarm_msgs::msg::PolicyWeights::TYPE_NAME) => { type $M = equiarm_msgs::msg::PolicyWeights; Ok($body) }
-            Some(equiarm_msgs::msg::TrainerStatus::TYPE_NAME) => { type $M = equiarm_msgs::msg::TrainerStatus; Ok($body) }
+            Some(equiarm_msgs::builtin_interfaces::Time::TYPE_NAME) => {
+                type $M = equiarm_msgs::builtin_interfaces::Time;
+                Ok($body)
+            }
+            Some(equiarm_msgs::std_msgs::Header::TYPE_NAME) => {
+                type $M = equiarm_msgs::std_msgs::Header;
+                Ok($body)
+            }
+            Some(equiarm_msgs::sensor_msgs::Image::TYPE_NAME) => {
+                type $M = equiarm_msgs::sensor_msgs::Image;
+                Ok($body)
+            }
+            Some(equiarm_msgs::sensor_msgs::CameraInfo::TYPE_NAME) => {
+                type $M = equiarm_msgs::sensor_msgs::CameraInfo;
+                Ok($body)
+            }
+            Some(equiarm_msgs::sensor_msgs::RegionOfInterest::TYPE_NAME) => {
+                type $M = equiarm_msgs::sensor_msgs::RegionOfInterest;
+                Ok($body)
+            }
+            Some(equiarm_msgs::msg::GripperCommand::TYPE_NAME) => {
+                type $M = equiarm_msgs::msg::GripperCommand;
+                Ok($body)
+            }
+            Some(equiarm_msgs::msg::Observation::TYPE_NAME) => {
+                type $M = equiarm_msgs::msg::Observation;
+                Ok($body)
+            }
+            Some(equiarm_msgs::msg::Transition::TYPE_NAME) => {
+                type $M = equiarm_msgs::msg::Transition;
+                Ok($body)
+            }
+            Some(equiarm_msgs::msg::EpisodeResult::TYPE_NAME) => {
+                type $M = equiarm_msgs::msg::EpisodeResult;
+                Ok($body)
+            }
+            Some(equiarm_msgs::msg::PolicyWeights::TYPE_NAME) => {
+                type $M = equiarm_msgs::msg::PolicyWeights;
+                Ok($body)
+            }
+            Some(equiarm_msgs::msg::TrainerStatus::TYPE_NAME) => {
+                type $M = equiarm_msgs::msg::TrainerStatus;
+                Ok($body)
+            }
             _ => Err(anyhow::anyhow!("unknown message type '{name}' (see `equiarm msg list`)")),
         }
     }};

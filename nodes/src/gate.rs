@@ -63,8 +63,12 @@ impl Gate {
     /// lock-step itself then) and needs a mode that takes weights (`learns`).
     pub fn new(max_lead: u64, steps_per_update: u64, deterministic: bool, learns: bool) -> anyhow::Result<Self> {
         let rule = match (deterministic, max_lead) {
-            (true, m) if m > 0 => bail!("--deterministic and --max-lead {m} exclude each other: in lock-step the k-th observation waits for weights version k + 1 instead"),
-            (true, _) if !learns => bail!("--deterministic needs --mode sample or greedy (it paces the node by the trainer's weights versions)"),
+            (true, m) if m > 0 => bail!(
+                "--deterministic and --max-lead {m} exclude each other: in lock-step the k-th observation waits for weights version k + 1 instead"
+            ),
+            (true, _) if !learns => bail!(
+                "--deterministic needs --mode sample or greedy (it paces the node by the trainer's weights versions)"
+            ),
             (true, _) => Rule::Lockstep,
             (false, 0) => Rule::Open,
             (false, m) => Rule::Lead { max_lead: m, per_update: steps_per_update, updates: None },
@@ -103,7 +107,10 @@ impl Gate {
                 let want = p.answered + 1;
                 if p.version > want && !self.newer_logged {
                     self.newer_logged = true;
-                    error!("lock-step broken: observation {} (seq {seq}) is answered with weights version {}, expected {want}; this run is not deterministic", p.answered, p.version);
+                    error!(
+                        "lock-step broken: observation {} (seq {seq}) is answered with weights version {}, expected {want}; this run is not deterministic",
+                        p.answered, p.version
+                    );
                 }
                 p.version >= want
             }

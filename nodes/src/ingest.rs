@@ -53,7 +53,15 @@ impl Ingest {
     /// For a run with `cfg`; `eval_namespace` names the eval env (`/eval` → `eval`).
     pub fn new(cfg: &TrainConfig, eval_namespace: &str) -> Self {
         let eval_env = eval_namespace.trim_matches('/').to_string();
-        Ingest { eval_env, image_size: cfg.image_size, timeout_terminal: cfg.timeout_terminal, last_next: HashMap::new(), held: HashMap::new(), decided: HashMap::new(), counts: Received::default() }
+        Ingest {
+            eval_env,
+            image_size: cfg.image_size,
+            timeout_terminal: cfg.timeout_terminal,
+            last_next: HashMap::new(),
+            held: HashMap::new(),
+            decided: HashMap::new(),
+            counts: Received::default(),
+        }
     }
 
     /// Whether an env name is the eval env.

@@ -5,17 +5,17 @@
 #[cfg(not(any(feature = "jazzy", feature = "humble")))]
 compile_error!("equiarm_nodes needs a ROS 2 distro feature: `jazzy` (the default) or `humble`");
 
-pub mod ros;
-pub mod echo;
-pub mod recorder;
 pub mod bag_tools;
-pub mod player;
-pub mod sim;
-pub mod policy_eval;
-pub mod train_cli;
-pub mod policy;
+pub mod echo;
 pub mod gate;
-pub mod policy_cli;
-pub mod trainer;
-pub mod lockstep;
 pub mod ingest;
+pub mod lockstep;
+pub mod player;
+pub mod policy;
+pub mod policy_cli;
+pub mod policy_eval;
+pub mod recorder;
+pub mod ros;
+pub mod sim;
+pub mod train_cli;
+pub mod trainer;

@@ -67,7 +67,11 @@ impl Lockstep {
         if !self.lanes.contains_key(env) {
             if self.lanes.len() >= self.num_envs {
                 let known: Vec<&str> = self.lanes.keys().map(String::as_str).collect();
-                return Err(format!("{what} from env '{env}' ignored: the run has num_envs = {} training envs ({})", self.num_envs, known.join(", ")));
+                return Err(format!(
+                    "{what} from env '{env}' ignored: the run has num_envs = {} training envs ({})",
+                    self.num_envs,
+                    known.join(", ")
+                ));
             }
             self.lanes.insert(env.to_string(), Lane::default());
         }
@@ -79,7 +83,9 @@ impl Lockstep {
         let (env, seq) = (t.obs.env.clone(), t.obs.seq);
         let lane = self.lane(&env, &format!("transition (seq {seq})"))?;
         if let Some(last) = lane.last_seq.filter(|&last| seq <= last) {
-            return Err(format!("transition of env '{env}' with seq {seq} ignored: it does not follow seq {last} (a repeat, or a restarted sim)"));
+            return Err(format!(
+                "transition of env '{env}' with seq {seq} ignored: it does not follow seq {last} (a repeat, or a restarted sim)"
+            ));
         }
         lane.last_seq = Some(seq);
         lane.transitions.push_back(t);
@@ -100,7 +106,9 @@ impl Lockstep {
     /// Whether the next round is complete.
     pub fn ready(&self) -> bool {
         self.lanes.len() >= self.num_envs
-            && self.lanes.values().all(|l| l.transitions.front().is_some_and(|t| !ends_episode(t) || l.results.contains_key(&t.obs.episode)))
+            && self.lanes.values().all(|l| {
+                l.transitions.front().is_some_and(|t| !ends_episode(t) || l.results.contains_key(&t.obs.episode))
+            })
     }
 
     /// The next round's messages in processing order, if it is complete.
@@ -127,12 +135,19 @@ impl Lockstep {
         let mut w = Vec::new();
         if self.lanes.len() < self.num_envs {
             let known: Vec<&str> = self.lanes.keys().map(String::as_str).collect();
-            w.push(format!("{} more training env(s) (num_envs = {}; known: {})", self.num_envs - self.lanes.len(), self.num_envs, known.join(", ")));
+            w.push(format!(
+                "{} more training env(s) (num_envs = {}; known: {})",
+                self.num_envs - self.lanes.len(),
+                self.num_envs,
+                known.join(", ")
+            ));
         }
         for (env, l) in &self.lanes {
             match l.transitions.front() {
                 None => w.push(format!("transition {} of {env}", self.rounds)),
-                Some(t) if ends_episode(t) && !l.results.contains_key(&t.obs.episode) => w.push(format!("EpisodeResult of {env} episode {}", t.obs.episode)),
+                Some(t) if ends_episode(t) && !l.results.contains_key(&t.obs.episode) => {
+                    w.push(format!("EpisodeResult of {env} episode {}", t.obs.episode))
+                }
                 Some(_) => {}
             }
         }

@@ -61,7 +61,11 @@ fn remap(remaps: &[(String, String)], topic: &str) -> String {
 }
 
 /// Waits up to `timeout` for a command naming `seq` (commands for other seqs are ignored).
-async fn wait_for_answer(sub: &crate::ros::Subscriber<GripperCommand>, seq: u64, timeout: Duration) -> anyhow::Result<bool> {
+async fn wait_for_answer(
+    sub: &crate::ros::Subscriber<GripperCommand>,
+    seq: u64,
+    timeout: Duration,
+) -> anyhow::Result<bool> {
     let deadline = Instant::now() + timeout;
     while let Some(left) = deadline.checked_duration_since(Instant::now()) {
         match sub.recv_timeout(left).await? {

@@ -46,9 +46,13 @@ pub fn frame_of(obs: &Observation) -> Result<Frame, String> {
     let color = obs.color.rgb8_data().map_err(|e| format!("colour: {e}"))?;
     let depth = obs.depth.float32_values().map_err(|e| format!("depth: {e}"))?;
     if (obs.color.width, obs.color.height) != (obs.depth.width, obs.depth.height) {
-        return Err(format!("colour is {}×{}, depth {}×{}", obs.color.width, obs.color.height, obs.depth.width, obs.depth.height));
+        return Err(format!(
+            "colour is {}×{}, depth {}×{}",
+            obs.color.width, obs.color.height, obs.depth.width, obs.depth.height
+        ));
     }
-    Frame::from_image(obs.color.width as usize, obs.color.height as usize, color.to_vec(), &depth, obs.holding).map_err(|e| e.to_string())
+    Frame::from_image(obs.color.width as usize, obs.color.height as usize, color.to_vec(), &depth, obs.holding)
+        .map_err(|e| e.to_string())
 }
 
 /// What became of a PolicyWeights sample.
@@ -82,7 +86,13 @@ pub struct Policy {
 impl Policy {
     /// A policy acting in `mode`; the learning modes build an actor of `agent` (seeded with `seed`),
     /// loaded from `actor` if given.
-    pub fn new(mode: PolicyMode, agent: AgentConfig, frame_size: usize, actor: Option<&Path>, seed: u64) -> anyhow::Result<Self> {
+    pub fn new(
+        mode: PolicyMode,
+        agent: AgentConfig,
+        frame_size: usize,
+        actor: Option<&Path>,
+        seed: u64,
+    ) -> anyhow::Result<Self> {
         let agent = match mode {
             PolicyMode::Sample | PolicyMode::Greedy => {
                 let mut a = Agent::new(agent, seed).context("building the actor")?;
@@ -93,7 +103,19 @@ impl Policy {
             }
             _ => None,
         };
-        Ok(Policy { mode, agent, frame_size, rng: Rng::new(seed), last: None, version: 0, latencies: VecDeque::new(), actions: 0, expert_episodes: 0, policy_steps: 0, answered: 0 })
+        Ok(Policy {
+            mode,
+            agent,
+            frame_size,
+            rng: Rng::new(seed),
+            last: None,
+            version: 0,
+            latencies: VecDeque::new(),
+            actions: 0,
+            expert_episodes: 0,
+            policy_steps: 0,
+            answered: 0,
+        })
     }
 
     /// Answer episodes `0..k` of the env with the expert.
@@ -106,7 +128,13 @@ impl Policy {
     pub fn progress(&self, obs: &Observation) -> Progress {
         let repeat = self.last.as_ref().is_some_and(|(seq, _)| *seq == obs.seq);
         let policy_step = !repeat && self.mode != PolicyMode::Expert && obs.episode >= self.expert_episodes;
-        Progress { repeat, policy_step, policy_steps: self.policy_steps, answered: self.answered, version: self.version }
+        Progress {
+            repeat,
+            policy_step,
+            policy_steps: self.policy_steps,
+            answered: self.answered,
+            version: self.version,
+        }
     }
 
     /// Whether this mode takes weights from the trainer.
@@ -133,15 +161,29 @@ impl Policy {
         let (u, source) = match (if expert { PolicyMode::Expert } else { self.mode }, self.agent.as_mut()) {
             (PolicyMode::Expert, _) => {
                 let source = GripperCommand::SOURCE_EXPERT;
-                return Ok(self.remember(GripperCommand { header: obs.header.clone(), obs_seq: obs.seq, source, ..obs.expert_action.clone() }));
+                return Ok(self.remember(GripperCommand {
+                    header: obs.header.clone(),
+                    obs_seq: obs.seq,
+                    source,
+                    ..obs.expert_action.clone()
+                }));
             }
-            (PolicyMode::Random, _) | (_, None) => ([(); 5].map(|_| self.rng.uniform(-1.0, 1.0)), GripperCommand::SOURCE_RANDOM),
+            (PolicyMode::Random, _) | (_, None) => {
+                ([(); 5].map(|_| self.rng.uniform(-1.0, 1.0)), GripperCommand::SOURCE_RANDOM)
+            }
             (mode, Some(agent)) => {
                 let frame = frame_of(obs)?;
                 if frame.size() != self.frame_size && self.actions == 0 {
-                    warn!("frames are {} px, the actor was set up for {} px (acting on the centre crop anyway)", frame.size(), self.frame_size);
+                    warn!(
+                        "frames are {} px, the actor was set up for {} px (acting on the centre crop anyway)",
+                        frame.size(),
+                        self.frame_size
+                    );
                 }
-                let (act, s) = (if mode == PolicyMode::Greedy { ActMode::Greedy } else { ActMode::Sample }, agent.config().input_size);
+                let (act, s) = (
+                    if mode == PolicyMode::Greedy { ActMode::Greedy } else { ActMode::Sample },
+                    agent.config().input_size,
+                );
                 let t0 = Instant::now();
                 let u = equiarm_sac::learner::act_on(agent, &[&frame], s, act).map_err(|e| e.to_string())?;
                 self.record_latency(t0.elapsed().as_secs_f64());
@@ -150,7 +192,16 @@ impl Policy {
         };
         let a = Action::from_normalized(u);
         let (header, obs_seq) = (obs.header.clone(), obs.seq);
-        let cmd = GripperCommand { header, obs_seq, open_ratio: a.open_ratio, dx: a.dx, dy: a.dy, dz: a.dz, dtheta: a.dtheta, source };
+        let cmd = GripperCommand {
+            header,
+            obs_seq,
+            open_ratio: a.open_ratio,
+            dx: a.dx,
+            dy: a.dy,
+            dz: a.dz,
+            dtheta: a.dtheta,
+            source,
+        };
         Ok(self.remember(cmd))
     }
 
@@ -161,7 +212,9 @@ impl Policy {
     }
 
     fn record_latency(&mut self, s: f64) {
-        if self.latencies.len() == 100 { self.latencies.pop_front(); }
+        if self.latencies.len() == 100 {
+            self.latencies.pop_front();
+        }
         self.latencies.push_back(s);
         self.actions += 1;
     }
@@ -179,7 +232,9 @@ impl Policy {
 
     /// Takes new weights if they are ours and newer (the payload moves into the actor, uncopied).
     pub fn on_weights(&mut self, w: PolicyWeights) -> WeightsOutcome {
-        let Some(agent) = self.agent.as_mut() else { return WeightsOutcome::Refused(format!("mode {:?} takes no weights", self.mode)) };
+        let Some(agent) = self.agent.as_mut() else {
+            return WeightsOutcome::Refused(format!("mode {:?} takes no weights", self.mode));
+        };
         let ours = agent.config().model.name();
         if ModelKind::parse(&w.model) != Some(agent.config().model) {
             return WeightsOutcome::Refused(format!("model '{}' is not this node's '{ours}'", w.model));
@@ -204,14 +259,23 @@ impl Policy {
 /// Runs the node until SIGINT/SIGTERM; returns the commands sent.
 pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
     let (agent, frame, actor) = architecture(args)?;
-    let mut policy = Policy::new(args.mode, agent.clone(), frame, actor.as_deref(), args.seed)?.with_expert_episodes(args.expert_episodes);
+    let mut policy = Policy::new(args.mode, agent.clone(), frame, actor.as_deref(), args.seed)?
+        .with_expert_episodes(args.expert_episodes);
     let mut gate = Gate::new(args.max_lead, args.steps_per_update, args.deterministic, policy.learns())?;
     let mut node = RosNode::new(&args.namespace, "policy", opts)?;
     let obs_sub = node.subscription::<Observation>("observation", qos::command())?;
     let cmd_pub = node.publisher::<GripperCommand>("gripper_cmd", qos::command())?;
-    let weights_sub = policy.learns().then(|| node.subscription::<PolicyWeights>(&args.weights_topic, qos::latched())).transpose()?;
-    let status_sub = gate.needs_status().then(|| node.subscription::<TrainerStatus>("/trainer/status", qos::stream(10))).transpose()?;
-    let arch = if policy.learns() { format!(", {} hidden {} input {}", agent.model.name(), agent.hidden, agent.input_size) } else { String::new() };
+    let weights_sub =
+        policy.learns().then(|| node.subscription::<PolicyWeights>(&args.weights_topic, qos::latched())).transpose()?;
+    let status_sub = gate
+        .needs_status()
+        .then(|| node.subscription::<TrainerStatus>("/trainer/status", qos::stream(10)))
+        .transpose()?;
+    let arch = if policy.learns() {
+        format!(", {} hidden {} input {}", agent.model.name(), agent.hidden, agent.input_size)
+    } else {
+        String::new()
+    };
     info!("{}: mode {:?}{arch}, gate {:?}", node.name(), args.mode, gate.rule());
     let (mut sent, mut bad, mut refused) = (0u64, 0u64, HashSet::new());
     let signal = shutdown_signal();
@@ -245,12 +309,22 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
         }
     }
     let held = if gate.holds() { " (one observation held back)" } else { "" };
-    info!("{}: sent {sent} commands, skipped {bad} observations, weights version {}{held}", node.name(), policy.version());
+    info!(
+        "{}: sent {sent} commands, skipped {bad} observations, weights version {}{held}",
+        node.name(),
+        policy.version()
+    );
     Ok(sent)
 }
 
 /// Answers `obs` and publishes the command; a bad Observation is counted and logged (rate-limited).
-async fn answer(policy: &mut Policy, obs: Observation, cmd_pub: &Publisher<GripperCommand>, sent: &mut u64, bad: &mut u64) {
+async fn answer(
+    policy: &mut Policy,
+    obs: Observation,
+    cmd_pub: &Publisher<GripperCommand>,
+    sent: &mut u64,
+    bad: &mut u64,
+) {
     match policy.answer(&obs) {
         Ok(cmd) => match cmd_pub.publish(cmd).await {
             Ok(()) => *sent += 1,
@@ -265,7 +339,9 @@ async fn answer(policy: &mut Policy, obs: Observation, cmd_pub: &Publisher<Gripp
     }
 }
 
-async fn recv_some<M: equiarm_msgs::RosMessage>(sub: Option<&Subscriber<M>>) -> anyhow::Result<(M, ros2_client::MessageInfo)> {
+async fn recv_some<M: equiarm_msgs::RosMessage>(
+    sub: Option<&Subscriber<M>>,
+) -> anyhow::Result<(M, ros2_client::MessageInfo)> {
     match sub {
         Some(s) => s.recv().await,
         None => std::future::pending().await,

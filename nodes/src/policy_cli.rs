@@ -76,7 +76,8 @@ pub fn architecture(args: &PolicyArgs) -> anyhow::Result<(AgentConfig, usize, Op
     }
     agent.hidden = args.hidden.unwrap_or(agent.hidden);
     if let Some(img) = &args.image {
-        let (f, i) = img.split_once(':').with_context(|| format!("--image `{img}`: expected FRAME:INPUT, e.g. 76:64"))?;
+        let (f, i) =
+            img.split_once(':').with_context(|| format!("--image `{img}`: expected FRAME:INPUT, e.g. 76:64"))?;
         frame = f.parse().with_context(|| format!("--image `{img}`: frame size"))?;
         agent.input_size = i.parse().with_context(|| format!("--image `{img}`: input size"))?;
     }

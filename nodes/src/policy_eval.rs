@@ -28,13 +28,7 @@ pub const DIMS: [&str; 5] = ["p", "dx", "dy", "dz", "dtheta"];
 
 /// The recorded action in the agent's normalised units.
 pub fn normalised(c: &GripperCommand) -> [f32; 5] {
-    [
-        2.0 * c.open_ratio - 1.0,
-        c.dx / 0.05,
-        c.dy / 0.05,
-        c.dz / 0.05,
-        c.dtheta / std::f32::consts::FRAC_PI_4,
-    ]
+    [2.0 * c.open_ratio - 1.0, c.dx / 0.05, c.dy / 0.05, c.dz / 0.05, c.dtheta / std::f32::consts::FRAC_PI_4]
 }
 
 /// The 5 × S × S network input of an observation (centre crop to `size`).
@@ -101,7 +95,9 @@ pub fn evaluate(bag: &Path, checkpoint: &Path, net: &str, cfg: &NetConfig) -> an
     let device = Device::flex();
     let init = Init::new(0);
     let actor: Box<dyn Actor> = match net {
-        "equi" => Box::new(equiarm_nn::checkpoint::load(EquiActor::new(cfg, &init, &device)?, checkpoint)?.cache_kernels()),
+        "equi" => {
+            Box::new(equiarm_nn::checkpoint::load(EquiActor::new(cfg, &init, &device)?, checkpoint)?.cache_kernels())
+        }
         "cnn" => Box::new(equiarm_nn::checkpoint::load(CnnActor::new(cfg, &init, &device)?, checkpoint)?),
         other => bail!("unknown --net '{other}': use equi or cnn"),
     };
@@ -124,22 +120,23 @@ pub fn evaluate(bag: &Path, checkpoint: &Path, net: &str, cfg: &NetConfig) -> an
     };
     let reader = Reader::open(bag)?;
     let mut failure = None;
-    reader.for_each(ReadMode::Salvage, |m| {
-        if m.type_name != Transition::TYPE_NAME {
-            return Ok(());
-        }
-        let step = (|| -> anyhow::Result<()> {
-            let t = cdr::decode::<Transition>(m.data)?;
-            inputs.extend(network_input(&t.obs, s).with_context(|| format!("{} seq {}", m.topic, t.obs.seq))?);
-            recorded.push(normalised(&t.action));
-            if recorded.len() == BATCH {
-                run(&mut inputs, &mut recorded)?;
+    reader
+        .for_each(ReadMode::Salvage, |m| {
+            if m.type_name != Transition::TYPE_NAME {
+                return Ok(());
             }
-            Ok(())
-        })();
-        step.map_err(|e| failure = Some(e))
-    })?
-    .ok();
+            let step = (|| -> anyhow::Result<()> {
+                let t = cdr::decode::<Transition>(m.data)?;
+                inputs.extend(network_input(&t.obs, s).with_context(|| format!("{} seq {}", m.topic, t.obs.seq))?);
+                recorded.push(normalised(&t.action));
+                if recorded.len() == BATCH {
+                    run(&mut inputs, &mut recorded)?;
+                }
+                Ok(())
+            })();
+            step.map_err(|e| failure = Some(e))
+        })?
+        .ok();
     if let Some(e) = failure {
         return Err(e);
     }
@@ -156,13 +153,23 @@ mod tests {
 
     #[test]
     fn recorded_actions_normalise_like_the_paper() {
-        let c = GripperCommand { open_ratio: 1.0, dx: 0.05, dy: -0.025, dz: 0.0, dtheta: -std::f32::consts::FRAC_PI_4, ..Default::default() };
+        let c = GripperCommand {
+            open_ratio: 1.0,
+            dx: 0.05,
+            dy: -0.025,
+            dz: 0.0,
+            dtheta: -std::f32::consts::FRAC_PI_4,
+            ..Default::default()
+        };
         assert_eq!(normalised(&c), [1.0, 1.0, -0.5, 0.0, -1.0]);
     }
 
     #[test]
     fn identical_actions_agree_fully() {
-        let pairs = vec![([0.5, -0.2, 0.1, 0.3, -0.9], [0.5, -0.2, 0.1, 0.3, -0.9]), ([-0.5, 0.2, -0.1, -0.3, 0.9], [-0.5, 0.2, -0.1, -0.3, 0.9])];
+        let pairs = vec![
+            ([0.5, -0.2, 0.1, 0.3, -0.9], [0.5, -0.2, 0.1, 0.3, -0.9]),
+            ([-0.5, 0.2, -0.1, -0.3, 0.9], [-0.5, 0.2, -0.1, -0.3, 0.9]),
+        ];
         let a = agreement(&pairs);
         assert_eq!(a.mae, [0.0; 5]);
         assert_eq!(a.sign, [1.0; 5]);

@@ -107,9 +107,10 @@ fn subscribe(
 
 /// ROS name and type of a discovered DDS topic, if it is a ROS topic of a known type.
 fn ros_topic(dds_name: &str, dds_type: &str) -> Option<(String, &'static str)> {
-    let name = dds_name.strip_prefix("rt/").map(|n| format!("/{n}")).or_else(|| {
-        dds_name.starts_with('/').then(|| dds_name.to_string())
-    })?;
+    let name = dds_name
+        .strip_prefix("rt/")
+        .map(|n| format!("/{n}"))
+        .or_else(|| dds_name.starts_with('/').then(|| dds_name.to_string()))?;
     let t = equiarm_msgs::ALL_TYPES.iter().find(|t| t.dds_type_name == dds_type)?;
     Some((name, t.type_name))
 }

@@ -68,15 +68,13 @@ pub mod qos {
 
 /// Where and how a node joins the ROS 2 graph. [`RosOptions::from_env`] reads the environment the
 /// way ROS 2 tools do; everything is also settable by hand (tests use their own domain ids).
-#[derive(Clone, Debug, PartialEq, Eq)]
-#[derive(Default)]
+#[derive(Clone, Debug, PartialEq, Eq, Default)]
 pub struct RosOptions {
     /// DDS domain (ROS_DOMAIN_ID), 0..=232.
     pub domain_id: u16,
     /// Use only the loopback interface (ROS_LOCALHOST_ONLY=1 or ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST).
     pub localhost_only: bool,
 }
-
 
 impl RosOptions {
     /// Reads `ROS_DOMAIN_ID`, `ROS_LOCALHOST_ONLY` and `ROS_AUTOMATIC_DISCOVERY_RANGE` (RustDDS ignores

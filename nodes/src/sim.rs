@@ -212,7 +212,10 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
                     } else if let Some(bad) = non_finite_fields(&cmd) {
                         stats.rejected += 1;
                         if stats.rejected.is_power_of_two() {
-                            warn!("rejecting the command for obs_seq {}: non-finite {bad} ({} rejected so far)", cmd.obs_seq, stats.rejected);
+                            warn!(
+                                "rejecting the command for obs_seq {}: non-finite {bad} ({} rejected so far)",
+                                cmd.obs_seq, stats.rejected
+                            );
                         }
                     } else {
                         break Some(cmd);
@@ -274,7 +277,11 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
                     expert: all_expert,
                     eval: args.eval,
                 };
-                info!("{}: episode {episode} (seed {seed}) ended after {steps} steps, success {}", node.name(), r.info.success);
+                info!(
+                    "{}: episode {episode} (seed {seed}) ended after {steps} steps, success {}",
+                    node.name(),
+                    r.info.success
+                );
                 episode_pub.publish(result).await?;
                 stats.episodes += 1;
                 seq += 1;
@@ -332,7 +339,13 @@ impl CameraPublishers {
 
 /// The Observation message of a library observation. Colour moves into its message; depth is
 /// encoded once as little-endian float32.
-fn observation(o: equiarm_sim::Observation, seq: u64, env: &str, episode: u32, stamp: Time) -> anyhow::Result<Observation> {
+fn observation(
+    o: equiarm_sim::Observation,
+    seq: u64,
+    env: &str,
+    episode: u32,
+    stamp: Time,
+) -> anyhow::Result<Observation> {
     let (h, w) = (o.height as u32, o.width as u32);
     let cam_header = Header::new(stamp.clone(), CAMERA_FRAME);
     let header = Header::new(stamp, WORLD_FRAME);
@@ -361,7 +374,13 @@ fn observation(o: equiarm_sim::Observation, seq: u64, env: &str, episode: u32, s
 
 /// `equiarm sim snapshot`: writes the colour, depth and segmentation PNGs of `task` after a reset with
 /// `seed` and `steps` expert steps into `out`; returns the paths written.
-pub fn snapshot(task: &str, seed: u64, steps: u32, view: Option<&str>, out: &std::path::Path) -> anyhow::Result<Vec<std::path::PathBuf>> {
+pub fn snapshot(
+    task: &str,
+    seed: u64,
+    steps: u32,
+    view: Option<&str>,
+    out: &std::path::Path,
+) -> anyhow::Result<Vec<std::path::PathBuf>> {
     let mut cfg = EnvConfig::new(parse_task(task)?);
     if let Some(v) = view {
         cfg.camera = parse_view(v)?.config();

@@ -128,7 +128,8 @@ impl TrainArgs {
         let task = self.task.clone().unwrap_or_else(|| "block_pulling".into());
         let mut cfg = match &self.config {
             Some(path) => {
-                let text = std::fs::read_to_string(path).with_context(|| format!("reading config {}", path.display()))?;
+                let text =
+                    std::fs::read_to_string(path).with_context(|| format!("reading config {}", path.display()))?;
                 TrainConfig::from_json(&text).map_err(|e| anyhow::anyhow!("config {}: {e}", path.display()))?
             }
             None => TrainConfig::preset(&self.preset, &task)
@@ -140,7 +141,8 @@ impl TrainArgs {
             cfg.task = t.clone();
         }
         if let Some(m) = &self.model {
-            cfg.agent.model = ModelKind::parse(m).ok_or_else(|| anyhow::anyhow!("unknown --model `{m}`: use equi, cnn or sen"))?;
+            cfg.agent.model =
+                ModelKind::parse(m).ok_or_else(|| anyhow::anyhow!("unknown --model `{m}`: use equi, cnn or sen"))?;
         }
         macro_rules! set {
             ($($flag:ident => $($field:ident).+),* $(,)?) => { $( if let Some(v) = self.$flag { cfg.$($field).+ = v; } )* };
@@ -149,7 +151,9 @@ impl TrainArgs {
              eval_episodes => eval_episodes, demo_episodes => demo_episodes, batch_size => batch_size,
              hidden => agent.hidden, lr => agent.lr, checkpoint_every => checkpoint_every, training_starts => training_starts);
         if let Some(img) = &self.image {
-            let (f, i) = img.split_once(':').ok_or_else(|| anyhow::anyhow!("--image `{img}`: expected FRAME:INPUT, e.g. 76:64"))?;
+            let (f, i) = img
+                .split_once(':')
+                .ok_or_else(|| anyhow::anyhow!("--image `{img}`: expected FRAME:INPUT, e.g. 76:64"))?;
             cfg.image_size = f.parse().with_context(|| format!("--image `{img}`: frame size"))?;
             cfg.agent.input_size = i.parse().with_context(|| format!("--image `{img}`: input size"))?;
         }
@@ -169,7 +173,9 @@ impl TrainArgs {
 /// Run the in-process loop; Ctrl-C / SIGTERM stop it after the current step with a checkpoint.
 pub fn run_in_process(args: &TrainArgs, cfg: TrainConfig) -> anyhow::Result<RunSummary> {
     if args.deterministic {
-        bail!("--deterministic is for the trainer node over DDS; the in-process loop (--in-process) is deterministic already");
+        bail!(
+            "--deterministic is for the trainer node over DDS; the in-process loop (--in-process) is deterministic already"
+        );
     }
     let stop = stop_flag();
     let resume = match &args.resume {
@@ -193,7 +199,10 @@ pub fn run_in_process(args: &TrainArgs, cfg: TrainConfig) -> anyhow::Result<RunS
 pub fn print_summary(s: &RunSummary) {
     println!("\n  updates   episodes   success rate   discounted return   mean length");
     for e in &s.evals {
-        println!("  {:>7}   {:>8}   {:>12.2}   {:>17.3}   {:>11.1}", e.updates, e.episodes, e.success_rate, e.discounted_return, e.mean_length);
+        println!(
+            "  {:>7}   {:>8}   {:>12.2}   {:>17.3}   {:>11.1}",
+            e.updates, e.episodes, e.success_rate, e.discounted_return, e.mean_length
+        );
     }
     println!("\nrun directory   {}", s.run_dir.display());
     println!("metrics         {}", s.run_dir.join("metrics.csv").display());
@@ -271,7 +280,9 @@ mod tests {
         let ck = root.join("run").join("checkpoints").join("step_0000010");
         std::fs::create_dir_all(&ck).unwrap();
         std::fs::write(ck.join("manifest.json"), "{}").unwrap();
-        let run_dir = |args: &[&str]| Cli::try_parse_from(std::iter::once("train").chain(args.iter().copied())).unwrap().train.run_dir();
+        let run_dir = |args: &[&str]| {
+            Cli::try_parse_from(std::iter::once("train").chain(args.iter().copied())).unwrap().train.run_dir()
+        };
         let (run, ck_s) = (root.join("run"), ck.to_string_lossy().into_owned());
         let run_s = run.to_string_lossy().into_owned();
         assert_eq!(run_dir(&[]), PathBuf::from("runs/latest"));

@@ -62,7 +62,8 @@ struct NodeState {
 type Update = JoinHandle<(Learner, Result<Metrics, LearnerError>)>;
 
 fn wall_stamp() -> Header {
-    let ns = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as i64).unwrap_or(0);
+    let ns =
+        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as i64).unwrap_or(0);
     Header::new(Time::from_nanos(ns), "")
 }
 
@@ -89,15 +90,29 @@ fn start_update(home: &mut Option<Learner>) -> Option<Update> {
 fn ingest_transition(ingest: &mut Ingest, t: &Transition, queue: &mut Vec<Stored>, bad_logged: &mut HashSet<String>) {
     match ingest.transition(t) {
         Ok(rows) => queue.extend(rows),
-        Err(e) if bad_logged.insert(e.clone()) => warn!("skipping a transition of '{}' (seq {}): {e}", t.obs.env, t.obs.seq),
+        Err(e) if bad_logged.insert(e.clone()) => {
+            warn!("skipping a transition of '{}' (seq {}): {e}", t.obs.env, t.obs.seq)
+        }
         Err(_) => {}
     }
 }
 
 /// Hands a training env's result to the ingest (released demos into `queue`) and logs its metrics.
-fn ingest_episode(ingest: &mut Ingest, r: &EpisodeResult, queue: &mut Vec<Stored>, metrics: &mut MetricsWriter, step: u64, wall_s: f64) -> anyhow::Result<()> {
+fn ingest_episode(
+    ingest: &mut Ingest,
+    r: &EpisodeResult,
+    queue: &mut Vec<Stored>,
+    metrics: &mut MetricsWriter,
+    step: u64,
+    wall_s: f64,
+) -> anyhow::Result<()> {
     queue.extend(ingest.episode(r));
-    let named = [("charts/episodic_return", r.ret as f64), ("charts/discounted_return", r.discounted_return as f64), ("charts/episodic_length", r.steps as f64), ("charts/success", r.success as u8 as f64)];
+    let named = [
+        ("charts/episodic_return", r.ret as f64),
+        ("charts/discounted_return", r.discounted_return as f64),
+        ("charts/episodic_length", r.steps as f64),
+        ("charts/success", r.success as u8 as f64),
+    ];
     metrics.log(step, wall_s, &named)?;
     Ok(())
 }
@@ -115,7 +130,13 @@ fn log_refused(r: Result<(), String>, refused: &mut u64) {
 /// Lock-step: a transition a sim sends before it has matched this trainer's reader is lost and
 /// stalls every round, so the first weights (which start the envs) wait until `/transitions` and
 /// `/episodes` have at least `n` writers each and their counts held still for a second (at most 60 s).
-async fn wait_for_sims(node: &RosNode, tr: &Subscriber<Transition>, ep: &Subscriber<EpisodeResult>, n: usize, stop: &std::sync::atomic::AtomicBool) {
+async fn wait_for_sims(
+    node: &RosNode,
+    tr: &Subscriber<Transition>,
+    ep: &Subscriber<EpisodeResult>,
+    n: usize,
+    stop: &std::sync::atomic::AtomicBool,
+) {
     let (t0, mut last, mut since) = (Instant::now(), (0, 0), Instant::now());
     loop {
         let now = (tr.publisher_count(node), ep.publisher_count(node));
@@ -127,7 +148,13 @@ async fn wait_for_sims(node: &RosNode, tr: &Subscriber<Transition>, ep: &Subscri
             return;
         }
         if stop.load(Ordering::Relaxed) || t0.elapsed() > Duration::from_secs(60) {
-            warn!("{}: {} writers on /transitions and {} on /episodes after {:.0} s (num_envs {n}); starting anyway", node.name(), now.0, now.1, t0.elapsed().as_secs_f64());
+            warn!(
+                "{}: {} writers on /transitions and {} on /episodes after {:.0} s (num_envs {n}); starting anyway",
+                node.name(),
+                now.0,
+                now.1,
+                t0.elapsed().as_secs_f64()
+            );
             return;
         }
         tokio::time::sleep(Duration::from_millis(100)).await;
@@ -137,7 +164,9 @@ async fn wait_for_sims(node: &RosNode, tr: &Subscriber<Transition>, ep: &Subscri
 /// Runs the trainer node until `total_updates`, a signal or the idle timeout.
 pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyhow::Result<RunSummary> {
     if args.deterministic && args.resume.is_some() {
-        anyhow::bail!("--deterministic does not resume (--resume): the policies count rounds from the first weights version of a fresh run");
+        anyhow::bail!(
+            "--deterministic does not resume (--resume): the policies count rounds from the first weights version of a fresh run"
+        );
     }
     let started = Instant::now();
     let dir = args.run_dir();
@@ -166,7 +195,8 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     // messages refused.
     let mut lockstep = args.deterministic.then(|| Lockstep::new(cfg.num_envs));
     let (mut last_round, mut stall_logged, mut refused) = (Instant::now(), None::<u64>, 0u64);
-    let (mut owed, mut since, mut pending_eval, mut queue) = (0u64, 0usize, Vec::<EpisodeResult>::new(), Vec::<Stored>::new());
+    let (mut owed, mut since, mut pending_eval, mut queue) =
+        (0u64, 0usize, Vec::<EpisodeResult>::new(), Vec::<Stored>::new());
     // The learner is None while an update runs; `known` is (updates, replay len, expert len, last metrics).
     let mut known = (learner.updates(), learner.replay().len(), learner.replay().expert_len(), Metrics::default());
     let (mut home, mut task): (Option<Learner>, Option<Update>) = (Some(learner), None);
@@ -180,7 +210,14 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
         st.version += 1;
         let data = learner.agent().actor_bytes()?;
         let model = cfg.agent.model.name().to_string();
-        let w = PolicyWeights { header: wall_stamp(), version: st.version, updates: learner.updates(), model, format: "safetensors".into(), data };
+        let w = PolicyWeights {
+            header: wall_stamp(),
+            version: st.version,
+            updates: learner.updates(),
+            model,
+            format: "safetensors".into(),
+            data,
+        };
         weights_pub.publish(w).await
     };
     if lockstep.is_some() {
@@ -251,16 +288,26 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
                 // Evaluations as in the paper: the eval pair's episodes that end once the update
                 // count has reached the next multiple of eval_every; the ones in between are dropped.
                 Err(r) if r.eval || ingest.is_eval(&r.env) => {
-                    let due = cfg.eval_every > 0 && known.0 >= (st.evals.last().map_or(0, |e| e.updates) / cfg.eval_every + 1) * cfg.eval_every;
+                    let due = cfg.eval_every > 0
+                        && known.0 >= (st.evals.last().map_or(0, |e| e.updates) / cfg.eval_every + 1) * cfg.eval_every;
                     if due {
                         pending_eval.push(r);
                     }
                     if due && pending_eval.len() >= cfg.eval_episodes.max(1) {
                         let e = evaluation(&pending_eval, known.0);
                         pending_eval.clear();
-                        let named = [("eval/success_rate", e.success_rate), ("eval/discounted_return", e.discounted_return), ("eval/episodic_return", e.mean_return), ("eval/episodic_length", e.mean_length), ("eval/updates", e.updates as f64)];
+                        let named = [
+                            ("eval/success_rate", e.success_rate),
+                            ("eval/discounted_return", e.discounted_return),
+                            ("eval/episodic_return", e.mean_return),
+                            ("eval/episodic_length", e.mean_length),
+                            ("eval/updates", e.updates as f64),
+                        ];
                         metrics.log(st.global_step, wall(&started), &named)?;
-                        info!("evaluation at {} updates: success rate {:.2}, discounted return {:.3}", e.updates, e.success_rate, e.discounted_return);
+                        info!(
+                            "evaluation at {} updates: success rate {:.2}, discounted return {:.3}",
+                            e.updates, e.success_rate, e.discounted_return
+                        );
                         st.evals.push(e);
                         write_curve(&dir, &cfg, &st.evals)?;
                     }
@@ -301,7 +348,14 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
             }
             if let Some(p) = progress.as_mut() {
                 let (name, n) = lockstep.as_ref().map_or(("owed", owed), |l| ("rounds", l.rounds()));
-                p.update(u, &[("alpha", format!("{:.3}", m.alpha)), ("transitions", ingest.counts.transitions.to_string()), (name, n.to_string())]);
+                p.update(
+                    u,
+                    &[
+                        ("alpha", format!("{:.3}", m.alpha)),
+                        ("transitions", ingest.counts.transitions.to_string()),
+                        (name, n.to_string()),
+                    ],
+                );
             }
             known.3 = m;
             home = Some(learner);
@@ -316,7 +370,14 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
                                 ingest_transition(&mut ingest, &t, &mut queue, &mut bad_logged);
                                 st.global_step += 1;
                             }
-                            Item::Episode(r) => ingest_episode(&mut ingest, &r, &mut queue, &mut metrics, st.global_step, wall(&started))?,
+                            Item::Episode(r) => ingest_episode(
+                                &mut ingest,
+                                &r,
+                                &mut queue,
+                                &mut metrics,
+                                st.global_step,
+                                wall(&started),
+                            )?,
                         }
                     }
                     true
@@ -335,7 +396,12 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
                 }
             }
             known = (learner.updates(), learner.replay().len(), learner.replay().expert_len(), known.3);
-            if lockstep.is_none() && stopping.is_none() && owed > 0 && learner.ready() && learner.updates() < cfg.total_updates {
+            if lockstep.is_none()
+                && stopping.is_none()
+                && owed > 0
+                && learner.ready()
+                && learner.updates() < cfg.total_updates
+            {
                 owed -= 1;
                 update = true;
             }
@@ -350,7 +416,12 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
             && stall_logged != Some(ls.rounds())
         {
             stall_logged = Some(ls.rounds());
-            warn!("deterministic: round {} has waited {:.0} s for {}", ls.rounds(), last_round.elapsed().as_secs_f64(), ls.waiting_for().join(", "));
+            warn!(
+                "deterministic: round {} has waited {:.0} s for {}",
+                ls.rounds(),
+                last_round.elapsed().as_secs_f64(),
+                ls.waiting_for().join(", ")
+            );
         }
         if last_status.elapsed() >= Duration::from_secs(1) {
             let dt = last_status.elapsed().as_secs_f32();
@@ -389,12 +460,31 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     write_curve(&dir, &cfg, &st.evals)?;
     if let Some(ls) = &lockstep {
         let (t, r) = ls.pending();
-        info!("deterministic: {} rounds; left outside a round: {t} transitions, {r} episode results; {refused} refused", ls.rounds());
+        info!(
+            "deterministic: {} rounds; left outside a round: {t} transitions, {r} episode results; {refused} refused",
+            ls.rounds()
+        );
     }
     let c = &ingest.counts;
-    info!("received {} transitions (stored {}, expert held {}, eval {})", c.transitions, c.stored, c.expert_held, c.eval);
-    info!("expert transitions dropped (failed episodes) {}, malformed {}; replay {}", c.expert_dropped, c.bad, learner.replay().len());
-    Ok(RunSummary { run_dir: dir, evals: st.evals, global_step: st.global_step, updates: learner.updates(), wall_s: wall(&started), last_checkpoint: last_ck, demos: c.expert_episodes })
+    info!(
+        "received {} transitions (stored {}, expert held {}, eval {})",
+        c.transitions, c.stored, c.expert_held, c.eval
+    );
+    info!(
+        "expert transitions dropped (failed episodes) {}, malformed {}; replay {}",
+        c.expert_dropped,
+        c.bad,
+        learner.replay().len()
+    );
+    Ok(RunSummary {
+        run_dir: dir,
+        evals: st.evals,
+        global_step: st.global_step,
+        updates: learner.updates(),
+        wall_s: wall(&started),
+        last_checkpoint: last_ck,
+        demos: c.expert_episodes,
+    })
 }
 
 /// One evaluation from its episodes.

@@ -49,7 +49,11 @@ fn sim_frames(n: usize) -> Vec<Observation> {
 fn peak_rss_mb() -> f64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
-        .and_then(|s| s.lines().find(|l| l.starts_with("VmHWM:")).map(|l| l.split_whitespace().nth(1).unwrap_or("0").parse::<f64>().unwrap_or(0.0)))
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .map(|l| l.split_whitespace().nth(1).unwrap_or("0").parse::<f64>().unwrap_or(0.0))
+        })
         .unwrap_or(0.0)
         / 1024.0
 }
@@ -61,7 +65,9 @@ fn main() {
     let pool: Vec<Vec<u8>> = sim_frames(64).iter().map(|o| cdr::encode(o).unwrap()).collect();
     let per = pool[0].len();
     let dir = std::env::temp_dir().join(format!("equiarm_bag_bench_{}", std::process::id()));
-    println!("bag write: {frames} simulator Observations of {per} bytes (152x152 rgb8 + 32FC1 depth), median of {rounds} rounds, fsync included");
+    println!(
+        "bag write: {frames} simulator Observations of {per} bytes (152x152 rgb8 + 32FC1 depth), median of {rounds} rounds, fsync included"
+    );
     println!("{:<12} {:>10} {:>10} {:>8}", "compression", "MB/s", "frames/s", "ratio");
     for (name, compression) in [("none", Compression::None), ("lz4", Compression::Lz4), ("zstd-3", Compression::Zstd)] {
         let mut rates = Vec::new();
@@ -70,7 +76,8 @@ fn main() {
             let bag = dir.join(format!("{name}_{round}"));
             let t = Instant::now();
             let mut w = Writer::create(&bag, WriterOptions { compression, ..Default::default() }).unwrap();
-            let id = w.add_topic(TopicInfo::of::<Observation>("/env0/observation", &[OfferedQos::reliable(10)])).unwrap();
+            let id =
+                w.add_topic(TopicInfo::of::<Observation>("/env0/observation", &[OfferedQos::reliable(10)])).unwrap();
             for k in 0..frames {
                 // encode as the recorder does (re-encoding a received message), then write
                 let data = &pool[k as usize % pool.len()];

@@ -101,11 +101,7 @@ impl EpisodeCollector {
     /// The episodes: from `EpisodeResult`s when the bag had any, else from transitions. Returns also
     /// whether they were reconstructed, and how many episodes were still unfinished.
     pub fn finish(self) -> (Vec<Episode>, bool, usize) {
-        if self.results.is_empty() {
-            (self.from_transitions, true, self.open.len())
-        } else {
-            (self.results, false, 0)
-        }
+        if self.results.is_empty() { (self.from_transitions, true, self.open.len()) } else { (self.results, false, 0) }
     }
 }
 

@@ -57,7 +57,9 @@ mod tests {
     #[test]
     fn integer_form_per_publisher() {
         let y = offered_qos_yaml(&[OfferedQos::best_effort(1), OfferedQos::latched(1)]);
-        assert!(y.starts_with("- history: 1\n  depth: 1\n  reliability: 2\n  durability: 2\n  deadline:\n    sec: 9223372036\n"));
+        assert!(y.starts_with(
+            "- history: 1\n  depth: 1\n  reliability: 2\n  durability: 2\n  deadline:\n    sec: 9223372036\n"
+        ));
         assert!(y.contains("\n- history: 1\n  depth: 1\n  reliability: 1\n  durability: 1\n"));
         assert!(!y.ends_with('\n'));
         assert_eq!(offered_qos_yaml(&[]), "[]");

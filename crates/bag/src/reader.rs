@@ -165,8 +165,11 @@ impl Reader {
             } else {
                 mcap::read::Options::IgnoreEndMagic.into()
             };
-            let stream = mcap::MessageStream::new_with_options(map, options)
-                .map_err(|source| BagError::Mcap { path: path.clone(), messages: 0, source })?;
+            let stream = mcap::MessageStream::new_with_options(map, options).map_err(|source| BagError::Mcap {
+                path: path.clone(),
+                messages: 0,
+                source,
+            })?;
             let mut in_file = 0u64;
             for m in stream {
                 let m = match m {

@@ -197,7 +197,10 @@ impl Writer {
 
     fn rosbag2_record(&self, at_open: bool) -> mcap::records::Metadata {
         let yaml = self.meta().serialized(at_open);
-        mcap::records::Metadata { name: "rosbag2".into(), metadata: BTreeMap::from([("serialized_metadata".into(), yaml)]) }
+        mcap::records::Metadata {
+            name: "rosbag2".into(),
+            metadata: BTreeMap::from([("serialized_metadata".into(), yaml)]),
+        }
     }
 
     fn open_file(&mut self) -> Result<(), BagError> {
@@ -210,7 +213,8 @@ impl Writer {
             .compression(self.opts.compression.mcap())
             .chunk_size(Some(self.opts.chunk_size));
         if self.opts.compression == Compression::Zstd {
-            options = options.compression_level(self.opts.zstd_level).compression_threads(self.opts.compression_threads);
+            options =
+                options.compression_level(self.opts.zstd_level).compression_threads(self.opts.compression_threads);
         }
         let mut mcap = options.create(BufWriter::with_capacity(1 << 20, file)).map_err(BagError::write(&path))?;
         mcap.write_metadata(&self.rosbag2_record(true)).map_err(BagError::write(&path))?;
@@ -230,12 +234,16 @@ impl Writer {
         if let Some(c) = self.topics[i].channel {
             return Ok(c);
         }
-        let f = self.open.as_mut().ok_or_else(|| BagError::Usage { path: self.dir.clone(), what: "bag is finished".into() })?;
+        let f = self
+            .open
+            .as_mut()
+            .ok_or_else(|| BagError::Usage { path: self.dir.clone(), what: "bag is finished".into() })?;
         let t = &self.topics[i].info;
         let schema = match f.schemas.get(&t.type_name) {
             Some(&s) => s,
             None => {
-                let s = f.mcap.add_schema(&t.type_name, &t.schema_encoding, &t.schema).map_err(BagError::write(&f.path))?;
+                let s =
+                    f.mcap.add_schema(&t.type_name, &t.schema_encoding, &t.schema).map_err(BagError::write(&f.path))?;
                 f.schemas.insert(t.type_name.clone(), s);
                 s
             }
@@ -251,7 +259,8 @@ impl Writer {
 
     /// Adds a topic (its schema and channel are written at once, so they survive a crash).
     pub fn add_topic(&mut self, info: TopicInfo) -> Result<TopicId, BagError> {
-        if let Some(i) = self.topics.iter().position(|t| t.info.name == info.name && t.info.type_name == info.type_name) {
+        if let Some(i) = self.topics.iter().position(|t| t.info.name == info.name && t.info.type_name == info.type_name)
+        {
             return Ok(TopicId(i));
         }
         self.topics.push(TopicState { info, count: 0, channel: None, sequence: 0 });
@@ -356,9 +365,10 @@ impl Drop for Writer {
     /// A writer dropped without [`Writer::finish`] (an error path, a panic) still finishes the bag.
     fn drop(&mut self) {
         if !self.finished
-            && let Err(e) = self.finish_inner() {
-                log::error!("finishing bag {} on drop: {e}", self.dir.display());
-            }
+            && let Err(e) = self.finish_inner()
+        {
+            log::error!("finishing bag {} on drop: {e}", self.dir.display());
+        }
     }
 }
 
@@ -370,8 +380,9 @@ pub(crate) fn write_atomically(path: &Path, data: &[u8]) -> Result<(), BagError>
     f.sync_all().map_err(BagError::io(&tmp))?;
     std::fs::rename(&tmp, path).map_err(BagError::io(path))?;
     if let Some(dir) = path.parent()
-        && let Ok(d) = File::open(dir) {
-            let _ = d.sync_all();
-        }
+        && let Ok(d) = File::open(dir)
+    {
+        let _ = d.sync_all();
+    }
     Ok(())
 }

@@ -49,12 +49,30 @@ fn parse() -> Args {
     while i < argv.len() {
         let val = argv.get(i + 1).cloned().unwrap_or_default();
         match argv[i].as_str() {
-            "--reps" => { a.reps = val.parse().expect("--reps N"); i += 1; }
-            "--config" => { a.configs = pick(&val, &["reduced", "paper"]); i += 1; }
-            "--net" => { a.nets = pick(&val, &["equi", "cnn"]); i += 1; }
-            "--mode" => { a.modes = pick(&val, &["fwd_b1", "fwd_b128", "train_b128"]); i += 1; }
-            "--threads" => { a.threads = val.parse().expect("--threads N"); i += 1; }
-            "--python" => { a.python = val; i += 1; }
+            "--reps" => {
+                a.reps = val.parse().expect("--reps N");
+                i += 1;
+            }
+            "--config" => {
+                a.configs = pick(&val, &["reduced", "paper"]);
+                i += 1;
+            }
+            "--net" => {
+                a.nets = pick(&val, &["equi", "cnn"]);
+                i += 1;
+            }
+            "--mode" => {
+                a.modes = pick(&val, &["fwd_b1", "fwd_b128", "train_b128"]);
+                i += 1;
+            }
+            "--threads" => {
+                a.threads = val.parse().expect("--threads N");
+                i += 1;
+            }
+            "--python" => {
+                a.python = val;
+                i += 1;
+            }
             "--no-peer" => a.peer = false,
             "--bench" => {}
             other => panic!("unknown argument {other}"),
@@ -88,13 +106,25 @@ fn sync<const D: usize>(t: Tensor<D>) {
 
 fn time_n(reps: usize, mut f: impl FnMut()) -> f64 {
     f();
-    median((0..reps).map(|_| { let t = Instant::now(); f(); t.elapsed().as_secs_f64() }).collect())
+    median(
+        (0..reps)
+            .map(|_| {
+                let t = Instant::now();
+                f();
+                t.elapsed().as_secs_f64()
+            })
+            .collect(),
+    )
 }
 
 fn bench_forward<A: Actor>(actor: &A, cfg: &NetConfig, batch: usize, reps: usize) -> f64 {
     let dev = Device::flex();
     let x = input(batch, cfg, &dev);
-    time_n(reps, || { let (m, s) = actor.forward(x.clone()); sync(m); sync(s); })
+    time_n(reps, || {
+        let (m, s) = actor.forward(x.clone());
+        sync(m);
+        sync(s);
+    })
 }
 
 fn run_train<A: Actor + Module>(actor: A, cfg: &NetConfig, reps: usize) -> f64 {
@@ -118,7 +148,19 @@ fn peer(args: &Args, net: &str, cfg: &str, mode: &str, reps: usize) -> Option<f6
     }
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/../../bench/e2cnn_peer.py");
     let out = Command::new(&args.python)
-        .args([script, "--net", net, "--config", cfg, "--mode", mode, "--threads", &args.threads.to_string(), "--reps", &reps.to_string()])
+        .args([
+            script,
+            "--net",
+            net,
+            "--config",
+            cfg,
+            "--mode",
+            mode,
+            "--threads",
+            &args.threads.to_string(),
+            "--reps",
+            &reps.to_string(),
+        ])
         .output()
         .ok()?;
     if !out.status.success() {
@@ -148,8 +190,12 @@ fn main() {
                 // batch 1 is cheap and noisy: take more runs
                 let reps = if mode == "fwd_b1" { (args.reps * 5).max(10) } else { args.reps };
                 let ours = match (net, mode) {
-                    ("equi", "train_b128") => run_train(EquiActor::new(&cfg, &Init::new(0), &Device::flex().autodiff()).unwrap(), &cfg, reps),
-                    ("cnn", "train_b128") => run_train(CnnActor::new(&cfg, &Init::new(0), &Device::flex().autodiff()).unwrap(), &cfg, reps),
+                    ("equi", "train_b128") => {
+                        run_train(EquiActor::new(&cfg, &Init::new(0), &Device::flex().autodiff()).unwrap(), &cfg, reps)
+                    }
+                    ("cnn", "train_b128") => {
+                        run_train(CnnActor::new(&cfg, &Init::new(0), &Device::flex().autodiff()).unwrap(), &cfg, reps)
+                    }
                     ("equi", m) => {
                         let a = EquiActor::new(&cfg, &Init::new(0), &Device::flex()).unwrap().cache_kernels();
                         bench_forward(&a, &cfg, if m == "fwd_b1" { 1 } else { 128 }, reps)

@@ -208,7 +208,7 @@ fn solve(rep_in: &Representation, rep_out: &Representation, k: usize) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::group::{act_pixel, Group};
+    use crate::group::{Group, act_pixel};
 
     fn count(a: &Representation, b: &Representation, k: usize) -> usize {
         kernel_basis(a, b, k).unwrap().len
@@ -279,10 +279,18 @@ mod tests {
                                                 let mut rhs = 0.0;
                                                 for a in 0..dout {
                                                     for bb in 0..di {
-                                                        rhs += rho_o[o * dout + a] * at(a, bb, r, c) * rho_i_inv[bb * di + i];
+                                                        rhs += rho_o[o * dout + a]
+                                                            * at(a, bb, r, c)
+                                                            * rho_i_inv[bb * di + i];
                                                     }
                                                 }
-                                                assert!((lhs - rhs).abs() < 1e-9, "{} {} → {} k={k} {e:?}", g.name(), ri.name(), ro.name());
+                                                assert!(
+                                                    (lhs - rhs).abs() < 1e-9,
+                                                    "{} {} → {} k={k} {e:?}",
+                                                    g.name(),
+                                                    ri.name(),
+                                                    ro.name()
+                                                );
                                             }
                                         }
                                     }

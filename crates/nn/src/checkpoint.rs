@@ -28,7 +28,9 @@ pub enum CheckpointError {
         message: String,
     },
     /// A tensor the network needs is not in the file.
-    #[error("{path}: tensor `{name}` (shape {expected:?}) is missing from the file: it was saved from another architecture")]
+    #[error(
+        "{path}: tensor `{name}` (shape {expected:?}) is missing from the file: it was saved from another architecture"
+    )]
     Missing {
         /// File.
         path: PathBuf,
@@ -38,7 +40,9 @@ pub enum CheckpointError {
         expected: Vec<usize>,
     },
     /// A tensor has a different shape in the file.
-    #[error("{path}: tensor `{name}` has shape {found:?} in the file but the network needs {expected:?}: it was saved from another architecture or size")]
+    #[error(
+        "{path}: tensor `{name}` has shape {found:?} in the file but the network needs {expected:?}: it was saved from another architecture or size"
+    )]
     Shape {
         /// File.
         path: PathBuf,
@@ -50,7 +54,9 @@ pub enum CheckpointError {
         found: Vec<usize>,
     },
     /// The file has a tensor the network does not.
-    #[error("{path}: the file has tensor `{name}`, which this network does not have: it was saved from another architecture")]
+    #[error(
+        "{path}: the file has tensor `{name}`, which this network does not have: it was saved from another architecture"
+    )]
     Unexpected {
         /// File.
         path: PathBuf,
@@ -61,11 +67,7 @@ pub enum CheckpointError {
 
 /// Names and shapes of a module's parameters, in module order.
 pub fn parameter_shapes<M: Module>(module: &M) -> Vec<(String, Vec<usize>)> {
-    module
-        .collect(None, None, false)
-        .into_iter()
-        .map(|t| (t.name.clone(), t.shape.to_vec()))
-        .collect()
+    module.collect(None, None, false).into_iter().map(|t| (t.name.clone(), t.shape.to_vec())).collect()
 }
 
 /// A store for saving with one metadata entry (`format: safetensors`).
@@ -79,9 +81,7 @@ fn canonical(store: SafetensorsStore) -> SafetensorsStore {
 /// Save `module`'s parameters to `path` (overwriting an existing file).
 pub fn save<M: Module>(module: &M, path: &Path) -> Result<(), CheckpointError> {
     let mut store = canonical(SafetensorsStore::from_file(path).overwrite(true));
-    module
-        .save_into(&mut store)
-        .map_err(|e| CheckpointError::Store { path: path.into(), message: e.to_string() })
+    module.save_into(&mut store).map_err(|e| CheckpointError::Store { path: path.into(), message: e.to_string() })
 }
 
 /// Load parameters from `path` into `module`, after checking that every tensor name and shape
@@ -117,7 +117,11 @@ fn load_checked<M: Module>(mut module: M, mut store: SafetensorsStore, path: &Pa
     for (name, shape) in &expected {
         match in_file.iter().find(|(n, _)| n == name) {
             None => {
-                return Err(CheckpointError::Missing { path: path.into(), name: name.clone(), expected: shape.clone() });
+                return Err(CheckpointError::Missing {
+                    path: path.into(),
+                    name: name.clone(),
+                    expected: shape.clone(),
+                });
             }
             Some((_, found)) if found != shape => {
                 return Err(CheckpointError::Shape {

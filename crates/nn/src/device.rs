@@ -244,7 +244,11 @@ mod tests {
         for name in ["cuda", "CUDA", "cuda:0", "cuda:3"] {
             let e = parse(name).unwrap_err();
             assert_eq!(e, DeviceError::NoCuda { name: name.into() });
-            assert!(e.to_string().contains("built without the `cuda` feature: rebuild with `cargo build --release --features cuda`"), "{e}");
+            assert!(
+                e.to_string()
+                    .contains("built without the `cuda` feature: rebuild with `cargo build --release --features cuda`"),
+                "{e}"
+            );
         }
     }
 

@@ -9,7 +9,7 @@
 
 use crate::group::{Element, Group};
 use crate::layers::transform;
-use crate::nets::{action_type, actor_out_type, lift_action, EquiActor, EquiCritic, RotEquiNet};
+use crate::nets::{EquiActor, EquiCritic, RotEquiNet, action_type, actor_out_type, lift_action};
 use crate::repr::FieldType;
 use burn::tensor::Tensor;
 
@@ -170,7 +170,10 @@ pub fn check_checkpoint(
     device: &burn::tensor::Device,
 ) -> Result<Vec<ElementError>, CheckError> {
     use crate::init::Init;
-    fn load<M: burn::module::Module>(m: M, path: Option<&std::path::Path>) -> Result<M, crate::checkpoint::CheckpointError> {
+    fn load<M: burn::module::Module>(
+        m: M,
+        path: Option<&std::path::Path>,
+    ) -> Result<M, crate::checkpoint::CheckpointError> {
         match path {
             Some(p) => crate::checkpoint::load(m, p),
             None => Ok(m),
@@ -187,7 +190,8 @@ pub fn check_checkpoint(
         NetKind::EquiActor => equivariance_errors(&load(EquiActor::new(cfg, &init, device)?, path)?, vec![obs]),
         NetKind::RotEqui => equivariance_errors(&load(RotEquiNet::new(cfg, &init, device)?, path)?, vec![obs]),
         NetKind::EquiCritic => {
-            let act: Tensor<2> = Tensor::from_data(TensorData::new(init.normal("check.act", batch * 5, 1.0), [batch, 5]), device);
+            let act: Tensor<2> =
+                Tensor::from_data(TensorData::new(init.normal("check.act", batch * 5, 1.0), [batch, 5]), device);
             equivariance_errors(&load(EquiCritic::new(cfg, &init, device)?, path)?, vec![obs, lifted(act.tanh())])
         }
     })

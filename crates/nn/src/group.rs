@@ -65,10 +65,7 @@ impl Group {
     /// The position of an element in this list is its [`Group::index`].
     pub fn elements(&self) -> Vec<Element> {
         let flips: &[u8] = if self.dihedral { &[0, 1] } else { &[0] };
-        flips
-            .iter()
-            .flat_map(|&flip| (0..self.n).map(move |rot| Element { flip, rot }))
-            .collect()
+        flips.iter().flat_map(|&flip| (0..self.n).map(move |rot| Element { flip, rot })).collect()
     }
 
     /// Index of an element in [`Group::elements`].
@@ -185,10 +182,7 @@ mod tests {
     use super::*;
 
     fn groups() -> Vec<Group> {
-        [1, 2, 3, 4, 8]
-            .iter()
-            .flat_map(|&n| [Group::cyclic(n), Group::dihedral(n)])
-            .collect()
+        [1, 2, 3, 4, 8].iter().flat_map(|&n| [Group::cyclic(n), Group::dihedral(n)]).collect()
     }
 
     fn matmul2(a: [[f64; 2]; 2], b: [[f64; 2]; 2]) -> [[f64; 2]; 2] {
@@ -271,10 +265,7 @@ mod tests {
     fn harmonic_action_matches_function_composition() {
         let eval = |c: &[f64; 6], p: [f64; 2]| {
             let phi = p[1].atan2(p[0]);
-            c[1] + c[2] * phi.cos()
-                + c[3] * phi.sin()
-                + c[4] * (2.0 * phi).cos()
-                + c[5] * (2.0 * phi).sin()
+            c[1] + c[2] * phi.cos() + c[3] * phi.sin() + c[4] * (2.0 * phi).cos() + c[5] * (2.0 * phi).sin()
         };
         let coeff = [0.0, 0.3, -1.2, 0.7, 0.4, -0.9];
         for g in groups() {

@@ -12,7 +12,7 @@
 //! quotient) and are refused otherwise; exact image equivariance needs even sizes before each
 //! 2×2 pool (PAPER_SPEC §1.4) and group elements that act on the pixel grid.
 
-use crate::basis::{kernel_basis, BasisError};
+use crate::basis::{BasisError, kernel_basis};
 use crate::group::Element;
 use crate::init::Init;
 use crate::repr::FieldType;
@@ -164,7 +164,13 @@ impl EquivariantConv {
             for ri in &in_runs {
                 let b = kernel_basis(&ri.rep, &ro.rep, kernel_size)
                     .map_err(|source| LayerError::Basis { path: path.into(), source })?;
-                row.push(Block { out_fields: ro.count, in_fields: ri.count, dim_out: b.dim_out, dim_in: b.dim_in, len: b.len });
+                row.push(Block {
+                    out_fields: ro.count,
+                    in_fields: ri.count,
+                    dim_out: b.dim_out,
+                    dim_in: b.dim_in,
+                    len: b.len,
+                });
                 solved.push(b);
             }
             // He-like: each dense output channel gets squared norm ≈ 2 in expectation, divided
@@ -398,4 +404,3 @@ pub fn conv2d_unfold(x: Tensor<4>, kernel: Tensor<4>, bias: Option<Tensor<1>>, p
         None => y,
     }
 }
-

@@ -17,7 +17,7 @@
 
 use crate::group::Group;
 use crate::init::Init;
-use crate::layers::{concat, group_pool, max_pool2, relu, EquivariantConv, LayerError};
+use crate::layers::{EquivariantConv, LayerError, concat, group_pool, max_pool2, relu};
 use crate::plain::{Conv, Linear};
 use crate::repr::{FieldType, Representation};
 use burn::module::Module;
@@ -102,7 +102,15 @@ impl NetConfig {
 /// padded and pooled (128 → 8), layer 5 padded at 8×8, layer 6 unpadded (8 → 6) and pooled, layer 7
 /// unpadded (3 → 1).
 fn paper_layers(w: [usize; 7]) -> [(usize, usize, bool); 7] {
-    [(w[0], 1, true), (w[1], 1, true), (w[2], 1, true), (w[3], 1, true), (w[4], 1, false), (w[5], 0, true), (w[6], 0, false)]
+    [
+        (w[0], 1, true),
+        (w[1], 1, true),
+        (w[2], 1, true),
+        (w[3], 1, true),
+        (w[4], 1, false),
+        (w[5], 0, true),
+        (w[6], 0, false),
+    ]
 }
 
 /// The pool-after flags of `(width, pad, pool after)` layers.
@@ -111,7 +119,13 @@ fn pool_flags(layers: &[(usize, usize, bool)]) -> Vec<bool> {
 }
 
 /// Plain 3×3 convs from `cin` channels through `layers`, named `{prefix}{i}`; with the last width.
-fn plain_convs(prefix: &str, cin: usize, layers: &[(usize, usize, bool)], init: &Init, device: &Device) -> (Vec<Conv>, usize) {
+fn plain_convs(
+    prefix: &str,
+    cin: usize,
+    layers: &[(usize, usize, bool)],
+    init: &Init,
+    device: &Device,
+) -> (Vec<Conv>, usize) {
     let mut cin = cin;
     let mut convs = Vec::new();
     for (i, &(w, pad, _)) in layers.iter().enumerate() {
@@ -174,11 +188,8 @@ impl EquiEncoder {
 /// The field type of the Equi SAC actor's output (11 channels): `irrep(1,1)` (dx, dy) ⊕
 /// `quotient(C4)` (θ, −θ parts) ⊕ 7 × trivial (p, dz, 5 log-stds). PAPER_SPEC §1.4.
 pub fn actor_out_type(group: Group) -> FieldType {
-    FieldType::new(
-        group,
-        vec![Representation::irrep(group, 1, 1), Representation::quotient_by_rotations(group)],
-    )
-    .concat(&FieldType::trivial(group, 7))
+    FieldType::new(group, vec![Representation::irrep(group, 1, 1), Representation::quotient_by_rotations(group)])
+        .concat(&FieldType::trivial(group, 7))
 }
 
 /// The field type of the lifted action (6 channels): 2 × trivial (p, dz) ⊕ `irrep(1,1)` (dx, dy)
@@ -236,7 +247,8 @@ impl EquiActor {
     pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
         let g = Group::dihedral(4);
         let enc = EquiEncoder::new("enc", g, cfg, init, device)?;
-        let head = EquivariantConv::new("head", &FieldType::regular(g, cfg.hidden), &actor_out_type(g), 1, 0, init, device)?;
+        let head =
+            EquivariantConv::new("head", &FieldType::regular(g, cfg.hidden), &actor_out_type(g), 1, 0, init, device)?;
         Ok(EquiActor { enc, head })
     }
 
@@ -274,8 +286,24 @@ pub struct EquiQHead {
 impl EquiQHead {
     fn new(path: &str, in_type: &FieldType, hidden: usize, init: &Init, device: &Device) -> Result<Self, NetError> {
         let g = in_type.group();
-        let conv1 = EquivariantConv::new(&format!("{path}.conv1"), in_type, &FieldType::regular(g, hidden), 1, 0, init, device)?;
-        let conv2 = EquivariantConv::new(&format!("{path}.conv2"), &FieldType::trivial(g, hidden), &FieldType::trivial(g, 1), 1, 0, init, device)?;
+        let conv1 = EquivariantConv::new(
+            &format!("{path}.conv1"),
+            in_type,
+            &FieldType::regular(g, hidden),
+            1,
+            0,
+            init,
+            device,
+        )?;
+        let conv2 = EquivariantConv::new(
+            &format!("{path}.conv2"),
+            &FieldType::trivial(g, hidden),
+            &FieldType::trivial(g, 1),
+            1,
+            0,
+            init,
+            device,
+        )?;
         Ok(EquiQHead { conv1, conv2, fields: hidden, dim: g.order() })
     }
 
@@ -455,7 +483,8 @@ impl SenEncoder {
     fn new(path: &str, cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
         let n = cfg.hidden;
         let w = [n / 2, n, 2 * n, 4 * n, 2 * n];
-        let layers = cfg.kept([(w[0], 1, true), (w[1], 1, true), (w[2], 1, true), (w[3], 1, true), (w[4], 1, false)])?;
+        let layers =
+            cfg.kept([(w[0], 1, true), (w[1], 1, true), (w[2], 1, true), (w[3], 1, true), (w[4], 1, false)])?;
         let (convs, _) = plain_convs(&format!("{path}.convs."), cfg.in_channels, &layers, init, device);
         let fc = Linear::new(&format!("{path}.fc"), 2 * n * 64, 8 * n, init, device);
         Ok(SenEncoder { convs, fc, pools: pool_flags(&layers) })
@@ -491,7 +520,15 @@ impl SenActor {
         let g = Group::dihedral(4);
         Ok(SenActor {
             enc: SenEncoder::new("enc", cfg, init, device)?,
-            head: EquivariantConv::new("head", &FieldType::regular(g, cfg.hidden), &actor_out_type(g), 1, 0, init, device)?,
+            head: EquivariantConv::new(
+                "head",
+                &FieldType::regular(g, cfg.hidden),
+                &actor_out_type(g),
+                1,
+                0,
+                init,
+                device,
+            )?,
         })
     }
 }
@@ -546,7 +583,15 @@ impl RotEquiNet {
         let g = Group::cyclic(8);
         Ok(RotEquiNet {
             enc: EquiEncoder::new("enc", g, cfg, init, device)?,
-            head: EquivariantConv::new("head", &FieldType::regular(g, cfg.hidden), &FieldType::trivial(g, 8), 1, 0, init, device)?,
+            head: EquivariantConv::new(
+                "head",
+                &FieldType::regular(g, cfg.hidden),
+                &FieldType::trivial(g, 8),
+                1,
+                0,
+                init,
+                device,
+            )?,
         })
     }
 

@@ -70,9 +70,7 @@ impl Representation {
             }
             ncos += 1;
         }
-        let reps: Vec<Element> = (0..ncos)
-            .map(|c| els[coset_of.iter().position(|&x| x == c).unwrap()])
-            .collect();
+        let reps: Vec<Element> = (0..ncos).map(|c| els[coset_of.iter().position(|&x| x == c).unwrap()]).collect();
         Self::from_fn(group, format!("quotient({name})"), ncos, true, |g| {
             let mut m = vec![0.0; ncos * ncos];
             for (c, &r) in reps.iter().enumerate() {
@@ -300,7 +298,8 @@ mod tests {
     }
 
     fn all_reps(g: Group) -> Vec<Representation> {
-        let mut v = vec![Representation::trivial(g), Representation::regular(g), Representation::quotient_by_rotations(g)];
+        let mut v =
+            vec![Representation::trivial(g), Representation::regular(g), Representation::quotient_by_rotations(g)];
         let n = g.n();
         for k in 0..=n / 2 {
             if g.is_dihedral() {

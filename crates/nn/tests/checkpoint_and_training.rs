@@ -7,7 +7,7 @@ mod common;
 use common::{device, randn, values};
 use equiarm_nn::burn::module::Module;
 use equiarm_nn::burn::optim::{AdamConfig, GradientsParams};
-use equiarm_nn::checkpoint::{load, parameter_shapes, save, to_bytes, CheckpointError};
+use equiarm_nn::checkpoint::{CheckpointError, load, parameter_shapes, save, to_bytes};
 use equiarm_nn::diagnostics::equivariance_errors;
 use equiarm_nn::init::Init;
 use equiarm_nn::nets::{Actor, CnnActor, EquiActor, NetConfig};

@@ -7,7 +7,7 @@ use common::{device, randn, rel_err};
 use equiarm_nn::burn::module::Param;
 use equiarm_nn::group::Group;
 use equiarm_nn::init::Init;
-use equiarm_nn::layers::{concat, group_pool, max_pool2, relu, transform, EquivariantConv};
+use equiarm_nn::layers::{EquivariantConv, concat, group_pool, max_pool2, relu, transform};
 use equiarm_nn::repr::{FieldType, Representation};
 
 const TOL: f64 = 1e-4;
@@ -128,7 +128,8 @@ fn cached_kernel_gives_the_same_output() {
     assert!(cached.uses_cached_kernel());
     assert_eq!(common::values(cached.forward(x)), common::values(y));
     // a module tracked by autodiff never uses a (possibly stale) cache
-    let tracked = EquivariantConv::new("c", &tin, &tout, 3, 1, &Init::new(3), &dev.clone().autodiff()).unwrap().cache_kernel();
+    let tracked =
+        EquivariantConv::new("c", &tin, &tout, 3, 1, &Init::new(3), &dev.clone().autodiff()).unwrap().cache_kernel();
     assert!(!tracked.uses_cached_kernel());
 }
 

@@ -48,40 +48,62 @@ fn main() {
         println!("dim {d}: mean {m:.3} var {v:.3}");
     }
     if std::env::var("CENTER").is_ok() {
-        l = { let mut c = cfg.clone(); c.augmentation = equiarm_sac::config::Augmentation::Center; let mut l2 = Learner::new(c).unwrap(); equiarm_sac::train::collect_demos(&mut l2, &env_cfg).unwrap(); l2 };
+        l = {
+            let mut c = cfg.clone();
+            c.augmentation = equiarm_sac::config::Augmentation::Center;
+            let mut l2 = Learner::new(c).unwrap();
+            equiarm_sac::train::collect_demos(&mut l2, &env_cfg).unwrap();
+            l2
+        };
     }
     // Greedy squared error per dimension on the replay's rows, and the spread (standard deviation)
     // of the greedy action across those observations: a spread near 0 means the actor ignores its
     // input (only biases have learned).
     let greedy = |l: &mut Learner| {
-        let rows: Vec<(std::sync::Arc<equiarm_sac::frame::Frame>, [f32; 5])> = (0..l.replay().len()).filter_map(|i| l.replay().get(i).map(|t| (t.obs.clone(), t.action))).collect();
+        let rows: Vec<(std::sync::Arc<equiarm_sac::frame::Frame>, [f32; 5])> =
+            (0..l.replay().len()).filter_map(|i| l.replay().get(i).map(|t| (t.obs.clone(), t.action))).collect();
         let frames: Vec<&equiarm_sac::frame::Frame> = rows.iter().map(|r| &*r.0).collect();
         let acts = l.act(&frames, equiarm_sac::agent::ActMode::Greedy).unwrap();
         let n = rows.len() as f64;
         let mut se = [0f64; 5];
         let mut mean = [0f64; 5];
-        for (a, r) in acts.iter().zip(&rows) { for d in 0..5 { se[d] += ((a[d] - r.1[d]) as f64).powi(2); mean[d] += a[d] as f64 / n; } }
+        for (a, r) in acts.iter().zip(&rows) {
+            for d in 0..5 {
+                se[d] += ((a[d] - r.1[d]) as f64).powi(2);
+                mean[d] += a[d] as f64 / n;
+            }
+        }
         let mut var = [0f64; 5];
-        for a in &acts { for d in 0..5 { var[d] += (a[d] as f64 - mean[d]).powi(2) / n; } }
+        for a in &acts {
+            for d in 0..5 {
+                var[d] += (a[d] as f64 - mean[d]).powi(2) / n;
+            }
+        }
         let r3 = |x: f64| (x * 1000.0).round() / 1000.0;
         (se.map(|x| r3(x / n)), var.map(|v| r3(v.sqrt())))
     };
     let (se, sd) = greedy(&mut l);
     println!("greedy mse per dim before {se:?}, spread {sd:?}");
-    let mut envs: Vec<equiarm_sim::Env> = (0..cfg.num_envs).map(|_| equiarm_sim::Env::new(env_cfg.clone()).unwrap()).collect();
+    let mut envs: Vec<equiarm_sim::Env> =
+        (0..cfg.num_envs).map(|_| equiarm_sim::Env::new(env_cfg.clone()).unwrap()).collect();
     for u in 1..=n {
         let m = l.update().unwrap();
         if eval_every > 0 && u % eval_every == 0 {
             let e = equiarm_sac::train::evaluate(&mut l, &mut envs, cfg.eval_episodes).unwrap();
-            println!("{u} eval success {:.2} over {} episodes, mean length {:.1}", e.success_rate, e.episodes, e.mean_length);
+            println!(
+                "{u} eval success {:.2} over {} episodes, mean length {:.1}",
+                e.success_rate, e.episodes, e.mean_length
+            );
         }
         if u % 20 == 0 || u == 1 {
             if u % 40 == 0 {
                 let (se, sd) = greedy(&mut l);
                 println!("greedy mse per dim {se:?}, spread {sd:?}");
             }
-            println!("{u} expert {:.3} actor {:.3} q {:.3} qloss {:.3} entropy {:.1}", m.expert_loss, m.actor_loss, m.qf1_values, m.qf1_loss, m.entropy);
+            println!(
+                "{u} expert {:.3} actor {:.3} q {:.3} qloss {:.3} entropy {:.1}",
+                m.expert_loss, m.actor_loss, m.qf1_values, m.qf1_loss, m.entropy
+            );
         }
     }
 }
-

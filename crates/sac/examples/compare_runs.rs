@@ -43,7 +43,8 @@ fn main() {
         for d in dirs {
             let path = Path::new(d).join("evals.json");
             let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-            let evals: Vec<EvalResult> = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            let evals: Vec<EvalResult> =
+                serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
             for e in &evals {
                 by_step.entry(e.updates).or_default().push(pick(e));
             }
@@ -54,7 +55,8 @@ fn main() {
             .map(|(u, v)| {
                 let n = v.len() as f64;
                 let m = v.iter().sum::<f64>() / n;
-                let sd = if v.len() > 1 { (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt() } else { 0.0 };
+                let sd =
+                    if v.len() > 1 { (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt() } else { 0.0 };
                 (*u as f64, m, sd / n.sqrt())
             })
             .collect();

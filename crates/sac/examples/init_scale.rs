@@ -36,7 +36,9 @@ fn main() {
         t = conv.forward(t);
         println!("conv {i} pre-relu mean/rms {:?}", stats(&t));
         t = relu(t);
-        if pools[i] { t = max_pool2(t); }
+        if pools[i] {
+            t = max_pool2(t);
+        }
     }
     let y = actor.head.forward(t);
     println!("head mean/rms {:?}", stats(&y));

@@ -6,7 +6,7 @@
 //! `cargo run -p equiarm_sac --example rollout -- RUN_DIR [EPISODES]`
 use equiarm_sac::agent::ActMode;
 use equiarm_sac::config::TrainConfig;
-use equiarm_sac::learner::{read_json, Learner};
+use equiarm_sac::learner::{Learner, read_json};
 use equiarm_sim::Action;
 
 fn main() {
@@ -37,8 +37,10 @@ fn run(dir: &std::path::Path, episodes: u64) -> Result<(), Box<dyn std::error::E
             let f = equiarm_sac::train::frame_of(&o)?;
             let g = l.act(&[&f], ActMode::Greedy)?[0];
             let e = o.expert_action.to_normalized();
-            println!("  t{t:02} tcp [{:.3} {:.3} {:.3}] greedy [{:+.2} {:+.2} {:+.2} {:+.2} {:+.2}] expert [{:+.2} {:+.2} {:+.2} {:+.2} {:+.2}]",
-                o.tcp[0], o.tcp[1], o.tcp[2], g[0], g[1], g[2], g[3], g[4], e[0], e[1], e[2], e[3], e[4]);
+            println!(
+                "  t{t:02} tcp [{:.3} {:.3} {:.3}] greedy [{:+.2} {:+.2} {:+.2} {:+.2} {:+.2}] expert [{:+.2} {:+.2} {:+.2} {:+.2} {:+.2}]",
+                o.tcp[0], o.tcp[1], o.tcp[2], g[0], g[1], g[2], g[3], g[4], e[0], e[1], e[2], e[3], e[4]
+            );
             let r = env.step(&Action::from_normalized(g))?;
             if r.done {
                 println!("  done success {} invalid {} timeout {}", r.info.success, r.info.invalid, r.info.timeout);

@@ -28,7 +28,9 @@ use equiarm_nn::burn::module::Module;
 use equiarm_nn::burn::optim::GradientsParams;
 use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
 use equiarm_nn::init::Init;
-use equiarm_nn::nets::{Actor, CnnActor, CnnCritic, Critic, EquiActor, EquiCritic, NetConfig, SenActor, SenCritic, gaussian_sample};
+use equiarm_nn::nets::{
+    Actor, CnnActor, CnnCritic, Critic, EquiActor, EquiCritic, NetConfig, SenActor, SenCritic, gaussian_sample,
+};
 use rand::SeedableRng as _;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -204,7 +206,9 @@ pub struct Batch {
 impl Batch {
     fn check(&self) -> Result<(), AgentError> {
         let plane = 5 * self.s * self.s;
-        let bad = |what: &str, got: usize, want: usize| Err(AgentError::Batch(format!("{what} has {got} values, expected {want}")));
+        let bad = |what: &str, got: usize, want: usize| {
+            Err(AgentError::Batch(format!("{what} has {got} values, expected {want}")))
+        };
         if self.b == 0 || self.m == 0 || self.k == 0 {
             return Err(AgentError::Batch(format!("empty batch (b {}, m {}, k {})", self.b, self.m, self.k)));
         }
@@ -217,7 +221,9 @@ impl Batch {
         if self.action.len() != 5 * self.b {
             return bad("action", self.action.len(), 5 * self.b);
         }
-        for (what, v) in [("reward", &self.reward), ("mask", &self.mask), ("expert", &self.expert), ("weight", &self.weight)] {
+        for (what, v) in
+            [("reward", &self.reward), ("mask", &self.mask), ("expert", &self.expert), ("weight", &self.weight)]
+        {
             if v.len() != self.b {
                 return bad(what, v.len(), self.b);
             }
@@ -335,7 +341,13 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
 
     /// A fresh agent on `device` (with or without autodiff; the agent adds it for training), after
     /// [`equiarm_nn::device::check`] has opened it.
-    pub fn build_on(cfg: AgentConfig, seed: u64, device: &Device, actor: Builder<A>, critic: Builder<C>) -> Result<Self, AgentError> {
+    pub fn build_on(
+        cfg: AgentConfig,
+        seed: u64,
+        device: &Device,
+        actor: Builder<A>,
+        critic: Builder<C>,
+    ) -> Result<Self, AgentError> {
         equiarm_nn::device::check(device)?;
         let plain = device.clone().without_autodiff();
         let device = plain.clone().autodiff();
@@ -395,7 +407,13 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
 
     /// Actions `[n, 5]` (normalised, in [−1, 1]) for `n` observations `[n, 5, s, s]`; `noise` is
     /// used in `Sample` mode (`[n, 5]` standard normals; drawn from the agent's RNG when `None`).
-    pub fn act(&mut self, obs: &[f32], n: usize, mode: ActMode, noise: Option<&[f32]>) -> Result<Vec<[f32; 5]>, AgentError> {
+    pub fn act(
+        &mut self,
+        obs: &[f32],
+        n: usize,
+        mode: ActMode,
+        noise: Option<&[f32]>,
+    ) -> Result<Vec<[f32; 5]>, AgentError> {
         let s = self.cfg.input_size;
         if obs.len() != n * 5 * s * s || n == 0 {
             return Err(AgentError::Batch(format!("act: {} values for {n} observations of 5×{s}×{s}", obs.len())));
@@ -403,7 +421,9 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         let eps = match (mode, noise) {
             (ActMode::Greedy, _) => None,
             (ActMode::Sample, Some(e)) if e.len() == n * 5 => Some(e.to_vec()),
-            (ActMode::Sample, Some(e)) => return Err(AgentError::Batch(format!("act: {} noise values for {n} actions", e.len()))),
+            (ActMode::Sample, Some(e)) => {
+                return Err(AgentError::Batch(format!("act: {} noise values for {n} actions", e.len())));
+            }
             (ActMode::Sample, None) => Some(self.normal(n * 5)),
         };
         if self.inference.is_none() {
@@ -434,16 +454,19 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         let plain = self.plain.clone();
         let alpha = self.log_alpha.exp();
         let gamma = self.cfg.gamma;
-        let col = |v: &[f32], rows: usize, d: &Device| Tensor::<2>::from_data(TensorData::new(v.to_vec(), [rows, 1]), d);
+        let col =
+            |v: &[f32], rows: usize, d: &Device| Tensor::<2>::from_data(TensorData::new(v.to_vec(), [rows, 1]), d);
         let repeat = |v: &[f32], times: usize| -> Vec<f32> { (0..times).flat_map(|_| v.iter().copied()).collect() };
 
         // --- critic target (no gradients): mean over the K next-observation crops.
         // The images move into the tensors (no copy of the batch's largest arrays).
-        let next = Tensor::<4>::from_data(TensorData::new(std::mem::take(&mut batch.next_obs), [k * b, 5, s, s]), &plain);
+        let next =
+            Tensor::<4>::from_data(TensorData::new(std::mem::take(&mut batch.next_obs), [k * b, 5, s, s]), &plain);
         let eps_next = self.normal(k * b * 5);
         let actor_plain = self.actor.valid();
         let (mn, ls) = actor_plain.forward(next.clone());
-        let (a_next, logp_next, _) = gaussian_sample(mn, ls, Tensor::from_data(TensorData::new(eps_next, [k * b, 5]), &plain));
+        let (a_next, logp_next, _) =
+            gaussian_sample(mn, ls, Tensor::from_data(TensorData::new(eps_next, [k * b, 5]), &plain));
         let (q1t, q2t) = self.target.forward(next, a_next);
         let reward = col(&repeat(&batch.reward, k), k * b, &plain);
         let mask = col(&repeat(&batch.mask, k), k * b, &plain);
@@ -515,7 +538,8 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
             alpha_loss: alpha_loss as f32,
             entropy: -mean_logp as f32,
         };
-        for (what, v) in [("critic loss", qf1_loss + qf2_loss), ("actor loss", actor_loss_v), ("alpha", metrics.alpha)] {
+        for (what, v) in [("critic loss", qf1_loss + qf2_loss), ("actor loss", actor_loss_v), ("alpha", metrics.alpha)]
+        {
             if !v.is_finite() {
                 return Err(AgentError::NonFinite { update: self.updates, what, value: v });
             }
@@ -572,16 +596,20 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
             rng: crate::rng::save_state(&self.rng),
         };
         let path = dir.join("agent.json");
-        let text = serde_json::to_string_pretty(&state).map_err(|e| AgentError::State { path: path.clone(), message: e.to_string() })?;
+        let text = serde_json::to_string_pretty(&state)
+            .map_err(|e| AgentError::State { path: path.clone(), message: e.to_string() })?;
         std::fs::write(&path, text).map_err(|e| AgentError::State { path, message: e.to_string() })
     }
 
     /// Restore everything [`Sac::save`] wrote (the agent must have been built with the same config).
     pub fn load(&mut self, dir: &Path) -> Result<(), AgentError> {
         let path = dir.join("agent.json");
-        let text = std::fs::read_to_string(&path).map_err(|e| AgentError::State { path: path.clone(), message: e.to_string() })?;
-        let state: AgentState = serde_json::from_str(&text).map_err(|e| AgentError::State { path: path.clone(), message: e.to_string() })?;
-        let rng = crate::rng::load_state(&state.rng).map_err(|message| AgentError::State { path: path.clone(), message })?;
+        let text = std::fs::read_to_string(&path)
+            .map_err(|e| AgentError::State { path: path.clone(), message: e.to_string() })?;
+        let state: AgentState = serde_json::from_str(&text)
+            .map_err(|e| AgentError::State { path: path.clone(), message: e.to_string() })?;
+        let rng =
+            crate::rng::load_state(&state.rng).map_err(|message| AgentError::State { path: path.clone(), message })?;
         let actor = equiarm_nn::checkpoint::load(self.actor.clone(), &dir.join("actor.safetensors"))?;
         let critic = equiarm_nn::checkpoint::load(self.critic.clone(), &dir.join("critic.safetensors"))?;
         let target = equiarm_nn::checkpoint::load(self.target.clone(), &dir.join("critic_target.safetensors"))?;
@@ -607,7 +635,16 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
 /// rows (`[k·b, 1]` inputs, copy `j` of row `i` at `j·b + i`), averaged over the copies (DrQ's K;
 /// `k = 1` for RAD): `[b, 1]`.
 #[allow(clippy::too_many_arguments)]
-pub fn critic_target(reward: Tensor<2>, mask: Tensor<2>, q1: Tensor<2>, q2: Tensor<2>, logp: Tensor<2>, alpha: f64, gamma: f64, k: usize) -> Tensor<2> {
+pub fn critic_target(
+    reward: Tensor<2>,
+    mask: Tensor<2>,
+    q1: Tensor<2>,
+    q2: Tensor<2>,
+    logp: Tensor<2>,
+    alpha: f64,
+    gamma: f64,
+    k: usize,
+) -> Tensor<2> {
     let [kb, _] = reward.dims();
     let b = kb / k.max(1);
     let y = reward + mask.mul_scalar(gamma) * (q1.min_pair(q2) - logp.mul_scalar(alpha));
@@ -677,7 +714,13 @@ impl Agent {
     }
 
     /// See [`Sac::act`].
-    pub fn act(&mut self, obs: &[f32], n: usize, mode: ActMode, noise: Option<&[f32]>) -> Result<Vec<[f32; 5]>, AgentError> {
+    pub fn act(
+        &mut self,
+        obs: &[f32],
+        n: usize,
+        mode: ActMode,
+        noise: Option<&[f32]>,
+    ) -> Result<Vec<[f32; 5]>, AgentError> {
         each!(self, a => a.act(obs, n, mode, noise))
     }
 
@@ -734,7 +777,10 @@ mod tests {
         let s = x.signum();
         let x = x.abs();
         let t = 1.0 / (1.0 + 0.3275911 * x);
-        let y = 1.0 - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t + 0.254829592) * t * (-x * x).exp();
+        let y = 1.0
+            - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t + 0.254829592)
+                * t
+                * (-x * x).exp();
         s * y
     }
 
@@ -778,7 +824,16 @@ mod tests {
         // row 0: terminal, both copies give 1.0.
         // row 1: copy 0: 0.9·(2 + 0.2) = 1.98; copy 1: 0.9·(3 − 0.1) = 2.61; mean 2.295.
         assert!((y[0] - 1.0).abs() < 1e-6 && (y[1] - 2.295).abs() < 1e-5, "{y:?}");
-        let y1 = vals(critic_target(t2(&[0.5], 1, 1), t2(&[1.0], 1, 1), t2(&[2.0], 1, 1), t2(&[1.5], 1, 1), t2(&[-5.0], 1, 1), 0.01, 0.99, 1));
+        let y1 = vals(critic_target(
+            t2(&[0.5], 1, 1),
+            t2(&[1.0], 1, 1),
+            t2(&[2.0], 1, 1),
+            t2(&[1.5], 1, 1),
+            t2(&[-5.0], 1, 1),
+            0.01,
+            0.99,
+            1,
+        ));
         assert!((y1[0] - (0.5 + 0.99 * (1.5 + 0.05))).abs() < 1e-6, "{y1:?}");
     }
 
@@ -815,7 +870,12 @@ mod tests {
                 last = a.update(data.clone()).unwrap().0;
             }
             assert!(last.qf1_loss < first.qf1_loss, "{model:?}: critic loss {} → {}", first.qf1_loss, last.qf1_loss);
-            assert!(last.expert_loss < first.expert_loss, "{model:?}: expert loss {} → {}", first.expert_loss, last.expert_loss);
+            assert!(
+                last.expert_loss < first.expert_loss,
+                "{model:?}: expert loss {} → {}",
+                first.expert_loss,
+                last.expert_loss
+            );
             for _ in 0..31 {
                 b.update(data.clone()).unwrap();
             }

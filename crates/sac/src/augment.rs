@@ -60,11 +60,7 @@ pub fn random_offset(rng: &mut impl rand::Rng, size: usize, out: usize) -> (usiz
 /// frame `i` cropped at `offsets[i]` = `(row0, col0)`; see [`Frame::write_planes`].
 ///
 /// Errors if the lengths differ, `out` is 0 or larger than a frame, or a window does not fit.
-pub fn network_input(
-    frames: &[&Frame],
-    offsets: &[(usize, usize)],
-    out: usize,
-) -> Result<Vec<f32>, AugmentError> {
+pub fn network_input(frames: &[&Frame], offsets: &[(usize, usize)], out: usize) -> Result<Vec<f32>, AugmentError> {
     let mut batch = Vec::new();
     network_input_into(frames, offsets, out, &mut batch)?;
     Ok(batch)
@@ -82,33 +78,16 @@ pub fn network_input_into(
     dst: &mut Vec<f32>,
 ) -> Result<(), AugmentError> {
     if frames.len() != offsets.len() {
-        return Err(AugmentError::LengthMismatch {
-            frames: frames.len(),
-            offsets: offsets.len(),
-        });
+        return Err(AugmentError::LengthMismatch { frames: frames.len(), offsets: offsets.len() });
     }
-    if let Some((index, f)) = frames
-        .iter()
-        .enumerate()
-        .find(|(_, f)| out == 0 || out > f.size())
-    {
-        return Err(AugmentError::CropTooLarge {
-            index,
-            size: f.size(),
-            out,
-        });
+    if let Some((index, f)) = frames.iter().enumerate().find(|(_, f)| out == 0 || out > f.size()) {
+        return Err(AugmentError::CropTooLarge { index, size: f.size(), out });
     }
     let per = PLANES * out * out;
     dst.resize(frames.len() * per, 0.0);
-    for (index, ((frame, &(row0, col0)), dst)) in frames
-        .iter()
-        .zip(offsets)
-        .zip(dst.chunks_exact_mut(per))
-        .enumerate()
+    for (index, ((frame, &(row0, col0)), dst)) in frames.iter().zip(offsets).zip(dst.chunks_exact_mut(per)).enumerate()
     {
-        frame
-            .write_planes(row0, col0, out, dst)
-            .map_err(|source| AugmentError::Frame { index, source })?;
+        frame.write_planes(row0, col0, out, dst).map_err(|source| AugmentError::Frame { index, source })?;
     }
     Ok(())
 }
@@ -152,10 +131,7 @@ mod tests {
             rows[r] += 1;
             cols[c] += 1;
         }
-        assert!(
-            rows[span..].iter().chain(&cols[span..]).all(|&n| n == 0),
-            "offset beyond size-out"
-        );
+        assert!(rows[span..].iter().chain(&cols[span..]).all(|&n| n == 0), "offset beyond size-out");
         let expect = draws as f64 / span as f64; // 10_000
         for counts in [&rows, &cols] {
             for &n in &counts[..span] {
@@ -176,10 +152,7 @@ mod tests {
         let x = network_input(&[&a, &b], &offsets, out).unwrap();
         let p = out * out;
         assert_eq!(x.len(), 2 * PLANES * p);
-        for (n, ((r0, c0), salt, hold)) in [((0, 7), 9u8, 0.0), ((7, 2), 200u8, 1.0)]
-            .into_iter()
-            .enumerate()
-        {
+        for (n, ((r0, c0), salt, hold)) in [((0, 7), 9u8, 0.0), ((7, 2), 200u8, 1.0)].into_iter().enumerate() {
             let s = &x[n * PLANES * p..(n + 1) * PLANES * p];
             for i in 0..out {
                 for j in 0..out {
@@ -199,25 +172,15 @@ mod tests {
         let a = pattern(12, false, 0);
         assert_eq!(
             network_input(&[&a, &a], &[(0, 0)], 4).unwrap_err(),
-            AugmentError::LengthMismatch {
-                frames: 2,
-                offsets: 1
-            }
+            AugmentError::LengthMismatch { frames: 2, offsets: 1 }
         );
         assert_eq!(
             network_input(&[&a], &[(0, 0)], 13).unwrap_err(),
-            AugmentError::CropTooLarge {
-                index: 0,
-                size: 12,
-                out: 13
-            }
+            AugmentError::CropTooLarge { index: 0, size: 12, out: 13 }
         );
         assert!(matches!(
             network_input(&[&a, &a], &[(0, 0), (0, 9)], 4),
-            Err(AugmentError::Frame {
-                index: 1,
-                source: FrameError::Window { .. }
-            })
+            Err(AugmentError::Frame { index: 1, source: FrameError::Window { .. } })
         ));
         assert!(network_input(&[], &[], 4).unwrap().is_empty());
     }

@@ -186,7 +186,13 @@ impl TrainConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         let err = |field: &'static str, message: String| Err(ConfigError { field, message });
         if equiarm_sim::TaskKind::from_name(&self.task).is_none() {
-            return err("task", format!("unknown task `{}`: use block_pulling, block_pushing, block_picking, drawer_opening or block_in_bowl", self.task));
+            return err(
+                "task",
+                format!(
+                    "unknown task `{}`: use block_pulling, block_pushing, block_picking, drawer_opening or block_in_bowl",
+                    self.task
+                ),
+            );
         }
         if equiarm_sim::ViewPreset::from_name(&self.view).is_none() {
             return err("view", format!("unknown camera preset `{}` (e.g. side, angle15 … angle90)", self.view));
@@ -255,10 +261,17 @@ mod tests {
         // reduced16 differs from reduced in exactly hidden, lr and the update count.
         let (r, r16) = (TrainConfig::reduced("block_pulling"), TrainConfig::reduced16("block_pulling"));
         assert_eq!((r16.agent.hidden, r16.agent.lr, r16.total_updates), (16, 3e-3, 7_500));
-        let back = TrainConfig { agent: AgentConfig { hidden: r.agent.hidden, lr: r.agent.lr, ..r16.agent.clone() }, total_updates: r.total_updates, ..r16 };
+        let back = TrainConfig {
+            agent: AgentConfig { hidden: r.agent.hidden, lr: r.agent.lr, ..r16.agent.clone() },
+            total_updates: r.total_updates,
+            ..r16
+        };
         assert_eq!(back, r);
         for name in ["reduced", "reduced16", "paper"] {
-            assert!(TrainConfig::preset(name, "block_pulling").is_some() && TrainConfig::PRESETS.contains(name), "{name}");
+            assert!(
+                TrainConfig::preset(name, "block_pulling").is_some() && TrainConfig::PRESETS.contains(name),
+                "{name}"
+            );
         }
     }
 

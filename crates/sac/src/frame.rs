@@ -56,9 +56,7 @@ pub enum FrameError {
         value: f32,
     },
     /// The requested crop window does not fit in the frame.
-    #[error(
-        "window of {out}×{out} at (row {row0}, col {col0}) does not fit in a {size}×{size} frame"
-    )]
+    #[error("window of {out}×{out} at (row {row0}, col {col0}) does not fit in a {size}×{size} frame")]
     Window {
         /// First row of the window.
         row0: usize,
@@ -83,10 +81,7 @@ pub struct Frame {
 
 impl std::fmt::Debug for Frame {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Frame")
-            .field("size", &self.size)
-            .field("holding", &self.holding)
-            .finish_non_exhaustive()
+        f.debug_struct("Frame").field("size", &self.size).field("holding", &self.holding).finish_non_exhaustive()
     }
 }
 
@@ -113,12 +108,7 @@ impl Frame {
     ///
     /// Errors: size 0 or above [`Frame::MAX_SIZE`], a wrong buffer length (naming expected and
     /// got), or a depth that is not finite after conversion (naming the pixel).
-    pub fn new(
-        size: usize,
-        color: Vec<u8>,
-        depth_m: &[f32],
-        holding: bool,
-    ) -> Result<Frame, FrameError> {
+    pub fn new(size: usize, color: Vec<u8>, depth_m: &[f32], holding: bool) -> Result<Frame, FrameError> {
         check_size(size)?;
         let n = size * size;
         check_len("depth", n, depth_m.len())?;
@@ -126,14 +116,9 @@ impl Frame {
         depth.convert_from_f32_slice(depth_m);
         Frame::from_f16(size, color, depth, holding).map_err(|e| match e {
             // Report the metres the caller gave, not the f16 infinity they became.
-            FrameError::NonFiniteDepth {
-                index, row, col, ..
-            } => FrameError::NonFiniteDepth {
-                index,
-                row,
-                col,
-                value: depth_m[index],
-            },
+            FrameError::NonFiniteDepth { index, row, col, .. } => {
+                FrameError::NonFiniteDepth { index, row, col, value: depth_m[index] }
+            }
             other => other,
         })
     }
@@ -154,12 +139,7 @@ impl Frame {
 
     /// Builds a frame from depth already in `f16` metres (used when loading checkpoints); the same
     /// checks as [`Frame::new`].
-    pub fn from_f16(
-        size: usize,
-        color: Vec<u8>,
-        depth: Vec<f16>,
-        holding: bool,
-    ) -> Result<Frame, FrameError> {
+    pub fn from_f16(size: usize, color: Vec<u8>, depth: Vec<f16>, holding: bool) -> Result<Frame, FrameError> {
         check_size(size)?;
         let n = size * size;
         check_len("color", n * 3, color.len())?;
@@ -172,12 +152,7 @@ impl Frame {
                 value: depth[index].to_f32(),
             });
         }
-        Ok(Frame {
-            size,
-            color,
-            depth,
-            holding,
-        })
+        Ok(Frame { size, color, depth, holding })
     }
 
     /// Side of the square frame in pixels.
@@ -210,24 +185,13 @@ impl Frame {
     /// row-major, into `dst` (length `5*out*out`).
     ///
     /// Errors if the window does not fit (or `out` is 0) or `dst` has the wrong length.
-    pub fn write_planes(
-        &self,
-        row0: usize,
-        col0: usize,
-        out: usize,
-        dst: &mut [f32],
-    ) -> Result<(), FrameError> {
+    pub fn write_planes(&self, row0: usize, col0: usize, out: usize, dst: &mut [f32]) -> Result<(), FrameError> {
         let size = self.size;
         let fits = out > 0
             && row0.checked_add(out).is_some_and(|e| e <= size)
             && col0.checked_add(out).is_some_and(|e| e <= size);
         if !fits {
-            return Err(FrameError::Window {
-                row0,
-                col0,
-                out,
-                size,
-            });
+            return Err(FrameError::Window { row0, col0, out, size });
         }
         let plane = out * out;
         check_len("dst", PLANES * plane, dst.len())?;
@@ -244,12 +208,7 @@ impl Frame {
         {
             let start = (row0 + i) * size + col0;
             let src = &self.color[start * 3..(start + out) * 3];
-            for (((px, r), g), b) in src
-                .chunks_exact(3)
-                .zip(r.iter_mut())
-                .zip(g.iter_mut())
-                .zip(b.iter_mut())
-            {
+            for (((px, r), g), b) in src.chunks_exact(3).zip(r.iter_mut()).zip(g.iter_mut()).zip(b.iter_mut()) {
                 *r = U8_TO_UNIT[px[0] as usize];
                 *g = U8_TO_UNIT[px[1] as usize];
                 *b = U8_TO_UNIT[px[2] as usize];
@@ -263,21 +222,14 @@ impl Frame {
 
 fn check_size(size: usize) -> Result<(), FrameError> {
     if size == 0 || size > Frame::MAX_SIZE {
-        return Err(FrameError::BadSize {
-            size,
-            max: Frame::MAX_SIZE,
-        });
+        return Err(FrameError::BadSize { size, max: Frame::MAX_SIZE });
     }
     Ok(())
 }
 
 fn check_len(what: &'static str, expected: usize, got: usize) -> Result<(), FrameError> {
     if expected != got {
-        return Err(FrameError::Length {
-            what,
-            expected,
-            got,
-        });
+        return Err(FrameError::Length { what, expected, got });
     }
     Ok(())
 }
@@ -302,46 +254,21 @@ mod tests {
     #[test]
     fn new_rejects_wrong_lengths_and_non_finite_depth() {
         let e = Frame::new(4, vec![0; 47], &[0.0; 16], false).unwrap_err();
-        assert_eq!(
-            e,
-            FrameError::Length {
-                what: "color",
-                expected: 48,
-                got: 47
-            }
-        );
+        assert_eq!(e, FrameError::Length { what: "color", expected: 48, got: 47 });
         let e = Frame::new(4, vec![0; 48], &[0.0; 15], false).unwrap_err();
-        assert_eq!(
-            e,
-            FrameError::Length {
-                what: "depth",
-                expected: 16,
-                got: 15
-            }
-        );
+        assert_eq!(e, FrameError::Length { what: "depth", expected: 16, got: 15 });
         let mut d = [1.0f32; 16];
         d[6] = f32::NAN;
         match Frame::new(4, vec![0; 48], &d, false).unwrap_err() {
-            FrameError::NonFiniteDepth {
-                index, row, col, ..
-            } => assert_eq!((index, row, col), (6, 1, 2)),
+            FrameError::NonFiniteDepth { index, row, col, .. } => assert_eq!((index, row, col), (6, 1, 2)),
             e => panic!("unexpected {e}"),
         }
         d[6] = 1.0e6; // overflows f16
-        assert!(matches!(
-            Frame::new(4, vec![0; 48], &d, false),
-            Err(FrameError::NonFiniteDepth { index: 6, .. })
-        ));
-        assert!(matches!(
-            Frame::new(0, vec![], &[], false),
-            Err(FrameError::BadSize { .. })
-        ));
+        assert!(matches!(Frame::new(4, vec![0; 48], &d, false), Err(FrameError::NonFiniteDepth { index: 6, .. })));
+        assert!(matches!(Frame::new(0, vec![], &[], false), Err(FrameError::BadSize { .. })));
         assert_eq!(
             Frame::from_image(4, 3, vec![0; 36], &[0.0; 12], false).unwrap_err(),
-            FrameError::NotSquare {
-                width: 4,
-                height: 3
-            }
+            FrameError::NotSquare { width: 4, height: 3 }
         );
         assert!(Frame::from_image(4, 4, vec![0; 48], &[0.5; 16], true).is_ok());
     }
@@ -375,22 +302,10 @@ mod tests {
         let f = pattern(10, false);
         let mut dst = vec![0.0; PLANES * 16];
         assert!(f.write_planes(6, 6, 4, &mut dst).is_ok());
-        assert!(matches!(
-            f.write_planes(7, 0, 4, &mut dst),
-            Err(FrameError::Window { .. })
-        ));
-        assert!(matches!(
-            f.write_planes(0, 7, 4, &mut dst),
-            Err(FrameError::Window { .. })
-        ));
-        assert!(matches!(
-            f.write_planes(usize::MAX, 0, 4, &mut dst),
-            Err(FrameError::Window { .. })
-        ));
-        assert!(matches!(
-            f.write_planes(0, 0, 3, &mut dst),
-            Err(FrameError::Length { what: "dst", .. })
-        ));
+        assert!(matches!(f.write_planes(7, 0, 4, &mut dst), Err(FrameError::Window { .. })));
+        assert!(matches!(f.write_planes(0, 7, 4, &mut dst), Err(FrameError::Window { .. })));
+        assert!(matches!(f.write_planes(usize::MAX, 0, 4, &mut dst), Err(FrameError::Window { .. })));
+        assert!(matches!(f.write_planes(0, 0, 3, &mut dst), Err(FrameError::Length { what: "dst", .. })));
     }
 
     #[test]

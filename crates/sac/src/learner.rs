@@ -110,7 +110,15 @@ impl Learner {
         let agent = Agent::new_on(cfg.agent.clone(), cfg.seed, &device)?;
         let replay = Replay::new(cfg.replay.clone())?;
         let beta = Linear { start: cfg.replay.beta_start, end: cfg.replay.beta_end, steps: cfg.total_updates };
-        Ok(Learner { rng: crate::rng::stream(cfg.seed, 0x7265_706c), cfg, agent, replay, beta, transitions: 0, last: None })
+        Ok(Learner {
+            rng: crate::rng::stream(cfg.seed, 0x7265_706c),
+            cfg,
+            agent,
+            replay,
+            beta,
+            transitions: 0,
+            last: None,
+        })
     }
 
     /// The config.
@@ -183,7 +191,9 @@ impl Learner {
         let size = self.cfg.image_size;
         let rows: Vec<&Stored> = slots
             .iter()
-            .map(|&i| self.replay.get(i).ok_or(crate::replay::ReplayError::SlotOutOfRange { slot: i, len: self.replay.len() }))
+            .map(|&i| {
+                self.replay.get(i).ok_or(crate::replay::ReplayError::SlotOutOfRange { slot: i, len: self.replay.len() })
+            })
             .collect::<Result<_, _>>()?;
         let b = rows.len();
         let (k, m) = match self.cfg.augmentation {
@@ -249,7 +259,11 @@ impl Learner {
         std::fs::create_dir_all(dir).map_err(|e| ck(e.to_string()))?;
         self.agent.save(dir)?;
         self.replay.save(&dir.join("replay.bin.zst"))?;
-        let state = LearnerState { updates: self.agent.updates(), transitions: self.transitions, rng: crate::rng::save_state(&self.rng) };
+        let state = LearnerState {
+            updates: self.agent.updates(),
+            transitions: self.transitions,
+            rng: crate::rng::save_state(&self.rng),
+        };
         write_json(&dir.join("learner.json"), &state).map_err(ck)?;
         let manifest = Manifest {
             format: CHECKPOINT_FORMAT,
@@ -277,7 +291,9 @@ impl Learner {
             let field = first_difference(&a, &b, "");
             return Err(LearnerError::Checkpoint {
                 path: dir.into(),
-                message: format!("made with another config (first difference: `{field}`); resume with the checkpoint's config or start a new run"),
+                message: format!(
+                    "made with another config (first difference: `{field}`); resume with the checkpoint's config or start a new run"
+                ),
             });
         }
         let ck = |message: String| LearnerError::Checkpoint { path: dir.into(), message };
@@ -287,7 +303,10 @@ impl Learner {
         self.rng = crate::rng::load_state(&state.rng).map_err(ck)?;
         self.transitions = state.transitions;
         if state.updates != self.agent.updates() {
-            return Err(LearnerError::Checkpoint { path: dir.into(), message: format!("learner.json says {} updates, agent.json {}", state.updates, self.agent.updates()) });
+            return Err(LearnerError::Checkpoint {
+                path: dir.into(),
+                message: format!("learner.json says {} updates, agent.json {}", state.updates, self.agent.updates()),
+            });
         }
         Ok(())
     }
@@ -308,9 +327,13 @@ pub fn act_on(agent: &mut Agent, frames: &[&Frame], s: usize, mode: ActMode) -> 
 
 /// Read `manifest.json` of a checkpoint directory.
 pub fn read_manifest(dir: &Path) -> Result<Manifest, LearnerError> {
-    let m: Manifest = read_json(&dir.join("manifest.json")).map_err(|message| LearnerError::Checkpoint { path: dir.into(), message })?;
+    let m: Manifest = read_json(&dir.join("manifest.json"))
+        .map_err(|message| LearnerError::Checkpoint { path: dir.into(), message })?;
     if m.format != CHECKPOINT_FORMAT {
-        return Err(LearnerError::Checkpoint { path: dir.into(), message: format!("checkpoint format {} (this build reads {CHECKPOINT_FORMAT})", m.format) });
+        return Err(LearnerError::Checkpoint {
+            path: dir.into(),
+            message: format!("checkpoint format {} (this build reads {CHECKPOINT_FORMAT})", m.format),
+        });
     }
     Ok(m)
 }

@@ -69,10 +69,7 @@ pub enum MetricsError {
 }
 
 fn io_err(path: &Path) -> impl FnOnce(io::Error) -> MetricsError + '_ {
-    move |source| MetricsError::Io {
-        path: path.to_path_buf(),
-        source,
-    }
+    move |source| MetricsError::Io { path: path.to_path_buf(), source }
 }
 
 /// Appends scalar records to `metrics.jsonl` and `metrics.csv` in a run directory.
@@ -93,15 +90,8 @@ impl MetricsWriter {
         let csv_path = dir.join(CSV_FILE);
         let jsonl = File::create(&jsonl_path).map_err(io_err(&jsonl_path))?;
         let mut csv = File::create(&csv_path).map_err(io_err(&csv_path))?;
-        csv.write_all(format!("{CSV_HEADER}\n").as_bytes())
-            .and_then(|_| csv.flush())
-            .map_err(io_err(&csv_path))?;
-        Ok(Self {
-            dir: dir.to_path_buf(),
-            jsonl,
-            csv,
-            last: None,
-        })
+        csv.write_all(format!("{CSV_HEADER}\n").as_bytes()).and_then(|_| csv.flush()).map_err(io_err(&csv_path))?;
+        Ok(Self { dir: dir.to_path_buf(), jsonl, csv, last: None })
     }
 
     /// Continues the logs in `dir` after a restart from the checkpoint taken at `up_to_step`: keeps
@@ -162,12 +152,7 @@ impl MetricsWriter {
         replace_atomically(&jsonl_path, &kept_json)?;
         replace_atomically(&csv_path, &kept_csv)?;
         let open = |p: &Path| OpenOptions::new().append(true).open(p).map_err(io_err(p));
-        Ok(Self {
-            dir: dir.to_path_buf(),
-            jsonl: open(&jsonl_path)?,
-            csv: open(&csv_path)?,
-            last,
-        })
+        Ok(Self { dir: dir.to_path_buf(), jsonl: open(&jsonl_path)?, csv: open(&csv_path)?, last })
     }
 
     /// The run directory.
@@ -186,62 +171,32 @@ impl MetricsWriter {
     /// in use) logged at `global_step`, `wall_time` seconds after the run started. Both files are
     /// flushed before returning. An empty `scalars` writes a JSONL record with only the two keys and
     /// no CSV rows.
-    pub fn log(
-        &mut self,
-        global_step: u64,
-        wall_time: f64,
-        scalars: &[(&str, f64)],
-    ) -> Result<(), MetricsError> {
+    pub fn log(&mut self, global_step: u64, wall_time: f64, scalars: &[(&str, f64)]) -> Result<(), MetricsError> {
         for (i, (name, _)) in scalars.iter().enumerate() {
             if name.is_empty() || *name == "global_step" || *name == "wall_time" {
-                return Err(MetricsError::BadName {
-                    name: name.to_string(),
-                });
+                return Err(MetricsError::BadName { name: name.to_string() });
             }
             if scalars[..i].iter().any(|(n, _)| n == name) {
-                return Err(MetricsError::DuplicateName {
-                    name: name.to_string(),
-                    global_step,
-                });
+                return Err(MetricsError::DuplicateName { name: name.to_string(), global_step });
             }
         }
-        let mut json = format!(
-            "{{\"global_step\":{global_step},\"wall_time\":{}",
-            json_number(wall_time)
-        );
+        let mut json = format!("{{\"global_step\":{global_step},\"wall_time\":{}", json_number(wall_time));
         let mut csv = String::new();
         let wall_csv = csv_number(wall_time);
         for (name, value) in scalars {
             // A &str always serialises to a JSON string.
             let key = serde_json::to_string(name).unwrap_or_default();
             json.push_str(&format!(",{key}:{}", json_number(*value)));
-            csv.push_str(&format!(
-                "{global_step},{wall_csv},{},{}\n",
-                csv_field(name),
-                csv_number(*value)
-            ));
+            csv.push_str(&format!("{global_step},{wall_csv},{},{}\n", csv_field(name), csv_number(*value)));
         }
         json.push_str("}\n");
         let jsonl_path = self.dir.join(JSONL_FILE);
         let csv_path = self.dir.join(CSV_FILE);
-        self.jsonl
-            .write_all(json.as_bytes())
-            .and_then(|_| self.jsonl.flush())
-            .map_err(io_err(&jsonl_path))?;
+        self.jsonl.write_all(json.as_bytes()).and_then(|_| self.jsonl.flush()).map_err(io_err(&jsonl_path))?;
         if !csv.is_empty() {
-            self.csv
-                .write_all(csv.as_bytes())
-                .and_then(|_| self.csv.flush())
-                .map_err(io_err(&csv_path))?;
+            self.csv.write_all(csv.as_bytes()).and_then(|_| self.csv.flush()).map_err(io_err(&csv_path))?;
         }
-        self.last = Some((
-            global_step,
-            if wall_time.is_finite() {
-                wall_time
-            } else {
-                f64::NAN
-            },
-        ));
+        self.last = Some((global_step, if wall_time.is_finite() { wall_time } else { f64::NAN }));
         Ok(())
     }
 }
@@ -256,30 +211,19 @@ fn json_number(v: f64) -> String {
 }
 
 fn csv_number(v: f64) -> String {
-    if v.is_finite() {
-        format!("{v}")
-    } else {
-        "nan".into()
-    }
+    if v.is_finite() { format!("{v}") } else { "nan".into() }
 }
 
 /// Quotes a CSV field when it contains a separator, a quote or a line break (RFC 4180).
 fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
+    if s.contains([',', '"', '\n', '\r']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() }
 }
 
 fn read_optional(path: &Path) -> Result<Option<String>, MetricsError> {
     match std::fs::read_to_string(path) {
         Ok(t) => Ok(Some(t)),
         Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(None),
-        Err(e) => Err(MetricsError::Io {
-            path: path.to_path_buf(),
-            source: e,
-        }),
+        Err(e) => Err(MetricsError::Io { path: path.to_path_buf(), source: e }),
     }
 }
 
@@ -290,10 +234,7 @@ fn complete_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
         Some(i) => &text[..i + 1],
         None => "",
     };
-    complete
-        .lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)))
+    complete.lines().enumerate().map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)))
 }
 
 struct JsonRecord {
@@ -302,13 +243,8 @@ struct JsonRecord {
 }
 
 fn parse_json_record(path: &Path, line_no: usize, line: &str) -> Result<JsonRecord, MetricsError> {
-    let bad = |reason: String| MetricsError::Malformed {
-        path: path.to_path_buf(),
-        line: line_no,
-        reason,
-    };
-    let value: serde_json::Value =
-        serde_json::from_str(line).map_err(|e| bad(format!("invalid JSON: {e}")))?;
+    let bad = |reason: String| MetricsError::Malformed { path: path.to_path_buf(), line: line_no, reason };
+    let value: serde_json::Value = serde_json::from_str(line).map_err(|e| bad(format!("invalid JSON: {e}")))?;
     let serde_json::Value::Object(object) = value else {
         return Err(bad("not a JSON object".into()));
     };
@@ -318,15 +254,10 @@ fn parse_json_record(path: &Path, line_no: usize, line: &str) -> Result<JsonReco
         .ok_or_else(|| bad("missing or non-integer \"global_step\"".into()))?;
     let wall = match object.get("wall_time") {
         Some(serde_json::Value::Null) => f64::NAN,
-        Some(v) => v
-            .as_f64()
-            .ok_or_else(|| bad("\"wall_time\" is not a number".into()))?,
+        Some(v) => v.as_f64().ok_or_else(|| bad("\"wall_time\" is not a number".into()))?,
         None => return Err(bad("missing \"wall_time\"".into())),
     };
-    Ok(JsonRecord {
-        keys: (step, wall),
-        object,
-    })
+    Ok(JsonRecord { keys: (step, wall), object })
 }
 
 fn replace_atomically(path: &Path, contents: &str) -> Result<(), MetricsError> {
@@ -334,9 +265,7 @@ fn replace_atomically(path: &Path, contents: &str) -> Result<(), MetricsError> {
     tmp_name.push(".tmp");
     let tmp = path.with_file_name(tmp_name);
     let mut f = File::create(&tmp).map_err(io_err(&tmp))?;
-    f.write_all(contents.as_bytes())
-        .and_then(|_| f.sync_all())
-        .map_err(io_err(&tmp))?;
+    f.write_all(contents.as_bytes()).and_then(|_| f.sync_all()).map_err(io_err(&tmp))?;
     drop(f);
     std::fs::rename(&tmp, path).map_err(io_err(path))
 }
@@ -382,12 +311,7 @@ mod tests {
         let dir = scratch("resume");
         let mut w = MetricsWriter::create(&dir).unwrap();
         for step in [100u64, 200, 300, 400] {
-            w.log(
-                step,
-                step as f64 / 100.0,
-                &[("losses/qf1_loss", 1.0 / step as f64)],
-            )
-            .unwrap();
+            w.log(step, step as f64 / 100.0, &[("losses/qf1_loss", 1.0 / step as f64)]).unwrap();
         }
         w.log(200, 2.5, &[("eval/success_rate", 0.5)]).unwrap();
         drop(w);
@@ -397,10 +321,7 @@ mod tests {
         drop(w);
         let qf1 = read_series(&dir, "losses/qf1_loss").unwrap();
         assert_eq!(qf1, vec![(100, 0.01), (200, 0.005), (300, 0.25)]);
-        assert_eq!(
-            read_series(&dir, "eval/success_rate").unwrap(),
-            vec![(200, 0.5)]
-        );
+        assert_eq!(read_series(&dir, "eval/success_rate").unwrap(), vec![(200, 0.5)]);
         let csv = std::fs::read_to_string(dir.join(CSV_FILE)).unwrap();
         let rows: Vec<&str> = csv.lines().collect();
         assert_eq!(
@@ -417,26 +338,14 @@ mod tests {
         // Resuming where nothing was logged starts fresh files.
         let empty = scratch("resume_empty");
         MetricsWriter::resume(&empty, 10).unwrap();
-        assert_eq!(
-            std::fs::read_to_string(empty.join(CSV_FILE)).unwrap(),
-            format!("{CSV_HEADER}\n")
-        );
+        assert_eq!(std::fs::read_to_string(empty.join(CSV_FILE)).unwrap(), format!("{CSV_HEADER}\n"));
     }
 
     #[test]
     fn csv_has_header_and_one_row_per_scalar() {
         let dir = scratch("csv");
         let mut w = MetricsWriter::create(&dir).unwrap();
-        w.log(
-            1000,
-            12.25,
-            &[
-                ("charts/SPS", 80.0),
-                ("losses/alpha", f64::NAN),
-                ("odd,name", 1.5),
-            ],
-        )
-        .unwrap();
+        w.log(1000, 12.25, &[("charts/SPS", 80.0), ("losses/alpha", f64::NAN), ("odd,name", 1.5)]).unwrap();
         let csv = std::fs::read_to_string(dir.join(CSV_FILE)).unwrap();
         assert_eq!(
             csv,
@@ -472,10 +381,7 @@ mod tests {
             other => panic!("unexpected {other:?}"),
         }
         assert!(err.to_string().contains("metrics.jsonl:3"), "{err}");
-        assert!(matches!(
-            MetricsWriter::resume(&dir, 10),
-            Err(MetricsError::Malformed { line: 3, .. })
-        ));
+        assert!(matches!(MetricsWriter::resume(&dir, 10), Err(MetricsError::Malformed { line: 3, .. })));
     }
 
     #[test]
@@ -484,10 +390,7 @@ mod tests {
         let mut w = MetricsWriter::create(&dir).unwrap();
         w.log(1, 0.5, &[("a", 1.0)]).unwrap();
         drop(w);
-        let mut f = OpenOptions::new()
-            .append(true)
-            .open(dir.join(JSONL_FILE))
-            .unwrap();
+        let mut f = OpenOptions::new().append(true).open(dir.join(JSONL_FILE)).unwrap();
         f.write_all(b"{\"global_step\":2,\"wall").unwrap();
         drop(f);
         assert_eq!(read_series(&dir, "a").unwrap(), vec![(1, 1.0)]);
@@ -500,18 +403,9 @@ mod tests {
     fn bad_names_are_rejected() {
         let dir = scratch("names");
         let mut w = MetricsWriter::create(&dir).unwrap();
-        assert!(matches!(
-            w.log(1, 0.0, &[("", 1.0)]),
-            Err(MetricsError::BadName { .. })
-        ));
-        assert!(matches!(
-            w.log(1, 0.0, &[("global_step", 1.0)]),
-            Err(MetricsError::BadName { .. })
-        ));
-        assert!(matches!(
-            w.log(1, 0.0, &[("a", 1.0), ("a", 2.0)]),
-            Err(MetricsError::DuplicateName { .. })
-        ));
+        assert!(matches!(w.log(1, 0.0, &[("", 1.0)]), Err(MetricsError::BadName { .. })));
+        assert!(matches!(w.log(1, 0.0, &[("global_step", 1.0)]), Err(MetricsError::BadName { .. })));
+        assert!(matches!(w.log(1, 0.0, &[("a", 1.0), ("a", 2.0)]), Err(MetricsError::DuplicateName { .. })));
         let missing = read_series(&scratch("nothing_here"), "a").unwrap_err();
         assert!(missing.to_string().contains("nothing_here"), "{missing}");
     }

@@ -133,7 +133,11 @@ impl Adam {
                     let n = dm.len();
                     moments.insert(
                         name.clone(),
-                        (shape.clone(), Tensor::from_data(TensorData::new(dm, [n]), device), Tensor::from_data(TensorData::new(dv, [n]), device)),
+                        (
+                            shape.clone(),
+                            Tensor::from_data(TensorData::new(dm, [n]), device),
+                            Tensor::from_data(TensorData::new(dv, [n]), device),
+                        ),
                     );
                 }
                 (None, None) if step == 0 => {}

@@ -89,12 +89,7 @@ pub struct Series {
 impl Series {
     /// A series without a band.
     pub fn new(label: impl Into<String>, color: [u8; 3], points: Vec<(f64, f64)>) -> Self {
-        Self {
-            label: label.into(),
-            color,
-            points,
-            band: None,
-        }
+        Self { label: label.into(), color, points, band: None }
     }
 }
 
@@ -117,11 +112,7 @@ pub struct Chart {
 
 impl Chart {
     /// A 900×560 chart with automatic y range.
-    pub fn new(
-        title: impl Into<String>,
-        x_label: impl Into<String>,
-        y_label: impl Into<String>,
-    ) -> Self {
+    pub fn new(title: impl Into<String>, x_label: impl Into<String>, y_label: impl Into<String>) -> Self {
         Self {
             title: title.into(),
             x_label: x_label.into(),
@@ -199,11 +190,7 @@ pub fn nice_ticks(min: f64, max: f64, target: usize) -> Ticks {
     // k × step, computed as k·mantissa / 10^-exp for negative exponents so that e.g. 3 × 0.2 is the
     // double nearest 0.6 rather than 0.6000000000000001.
     let at = |k: i64| {
-        if exp < 0 {
-            k as f64 * mantissa / 10f64.powi(-exp)
-        } else {
-            k as f64 * mantissa * 10f64.powi(exp)
-        }
+        if exp < 0 { k as f64 * mantissa / 10f64.powi(-exp) } else { k as f64 * mantissa * 10f64.powi(exp) }
     };
     let step = at(1);
     // Small tolerance so that a bound sitting on a tick (up to rounding) does not add a tick.
@@ -380,11 +367,7 @@ fn glyph_drop(c: char) -> i64 {
 
 fn glyph(c: char) -> &'static [u8; 7] {
     let code = c as u32;
-    if (32..=126).contains(&code) {
-        &FONT[(code - 32) as usize]
-    } else {
-        &FONT[(b'?' - 32) as usize]
-    }
+    if (32..=126).contains(&code) { &FONT[(code - 32) as usize] } else { &FONT[(b'?' - 32) as usize] }
 }
 
 /// Width in pixels of `text` at `scale`.
@@ -411,9 +394,7 @@ struct Rect {
 
 impl Canvas {
     fn new(w: u32, h: u32) -> Self {
-        Self {
-            img: RgbImage::from_pixel(w, h, Rgb([255, 255, 255])),
-        }
+        Self { img: RgbImage::from_pixel(w, h, Rgb([255, 255, 255])) }
     }
 
     fn w(&self) -> i64 {
@@ -464,11 +445,7 @@ impl Canvas {
         for y in y0..y1 {
             for x in x0..x1 {
                 let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
-                let t = if len2 > 0.0 {
-                    (((px - a.0) * dx + (py - a.1) * dy) / len2).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
+                let t = if len2 > 0.0 { (((px - a.0) * dx + (py - a.1) * dy) / len2).clamp(0.0, 1.0) } else { 0.0 };
                 let (cx, cy) = (a.0 + t * dx, a.1 + t * dy);
                 let d = ((px - cx).powi(2) + (py - cy).powi(2)).sqrt();
                 let coverage = (half + 0.5 - d).clamp(0.0, 1.0);
@@ -526,12 +503,7 @@ impl Canvas {
                         // Unrotated (col, row) maps to (row, -col).
                         let px = x + row * scale;
                         let py = y - along - (col + 1) * scale;
-                        let r = Rect {
-                            x0: px,
-                            y0: py,
-                            x1: px + scale,
-                            y1: py + scale,
-                        };
+                        let r = Rect { x0: px, y0: py, x1: px + scale, y1: py + scale };
                         self.fill_rect(r, color, 1.0);
                     }
                 }
@@ -564,10 +536,7 @@ impl Frame {
         let fy = (y - self.y_range.0) / (self.y_range.1 - self.y_range.0);
         let w = (self.plot.x1 - self.plot.x0 - 1) as f64;
         let h = (self.plot.y1 - self.plot.y0 - 1) as f64;
-        (
-            self.plot.x0 as f64 + 0.5 + fx * w,
-            self.plot.y1 as f64 - 0.5 - fy * h,
-        )
+        (self.plot.x0 as f64 + 0.5 + fx * w, self.plot.y1 as f64 - 0.5 - fy * h)
     }
 }
 
@@ -578,10 +547,7 @@ fn finite_point(p: &(f64, f64)) -> bool {
 fn validate(chart: &Chart, series: &[Series]) -> Result<(), PlotError> {
     let ok = |v: u32| (64..=16384).contains(&v);
     if !ok(chart.width) || !ok(chart.height) {
-        return Err(PlotError::BadSize {
-            width: chart.width,
-            height: chart.height,
-        });
+        return Err(PlotError::BadSize { width: chart.width, height: chart.height });
     }
     if let Some((min, max)) = chart.y_range
         && !(min.is_finite() && max.is_finite() && min < max)
@@ -592,11 +558,7 @@ fn validate(chart: &Chart, series: &[Series]) -> Result<(), PlotError> {
         if let Some(band) = &s.band
             && band.len() != s.points.len()
         {
-            return Err(PlotError::BandLength {
-                label: s.label.clone(),
-                points: s.points.len(),
-                band: band.len(),
-            });
+            return Err(PlotError::BandLength { label: s.label.clone(), points: s.points.len(), band: band.len() });
         }
     }
     Ok(())
@@ -610,18 +572,11 @@ fn extent(series: &[Series]) -> Option<((f64, f64), (f64, f64))> {
             if !finite_point(p) {
                 continue;
             }
-            let half = s
-                .band
-                .as_ref()
-                .map(|b| b[i])
-                .filter(|h| h.is_finite())
-                .map_or(0.0, f64::abs);
+            let half = s.band.as_ref().map(|b| b[i]).filter(|h| h.is_finite()).map_or(0.0, f64::abs);
             let (ylo, yhi) = (p.1 - half, p.1 + half);
             ext = Some(match ext {
                 None => ((p.0, p.0), (ylo, yhi)),
-                Some(((x0, x1), (y0, y1))) => {
-                    ((x0.min(p.0), x1.max(p.0)), (y0.min(ylo), y1.max(yhi)))
-                }
+                Some(((x0, x1), (y0, y1))) => ((x0.min(p.0), x1.max(p.0)), (y0.min(ylo), y1.max(yhi))),
             });
         }
     }
@@ -653,45 +608,19 @@ fn layout(chart: &Chart, series: &[Series]) -> (Frame, Ticks, Ticks) {
             (r, t)
         }
     };
-    let y_tick_w = y_ticks
-        .values
-        .iter()
-        .map(|&v| text_width(&format_tick(v, y_ticks.step), 1))
-        .max()
-        .unwrap_or(0);
+    let y_tick_w = y_ticks.values.iter().map(|&v| text_width(&format_tick(v, y_ticks.step), 1)).max().unwrap_or(0);
     let legend_w = legend_width(series);
     let (w, h) = (chart.width as i64, chart.height as i64);
-    let top = if chart.title.is_empty() {
-        16
-    } else {
-        16 + 2 * GLYPH_H + 14
-    };
-    let left =
-        12 + if chart.y_label.is_empty() {
-            0
-        } else {
-            GLYPH_H + 10
-        } + y_tick_w
-            + 8;
-    let bottom = 8
-        + GLYPH_H
-        + 8
-        + if chart.x_label.is_empty() {
-            0
-        } else {
-            GLYPH_H + 10
-        };
+    let top = if chart.title.is_empty() { 16 } else { 16 + 2 * GLYPH_H + 14 };
+    let left = 12 + if chart.y_label.is_empty() { 0 } else { GLYPH_H + 10 } + y_tick_w + 8;
+    let bottom = 8 + GLYPH_H + 8 + if chart.x_label.is_empty() { 0 } else { GLYPH_H + 10 };
     let right = if legend_w > 0 { legend_w + 24 } else { 24 };
     // Never let margins eat the whole canvas (tiny images still get a plot of some size).
     let x0 = left.min(w / 3);
     let x1 = (w - right).max(x0 + w / 3);
     let y0 = top.min(h / 3);
     let y1 = (h - bottom).max(y0 + h / 3);
-    let frame = Frame {
-        plot: Rect { x0, y0, x1, y1 },
-        x_range,
-        y_range,
-    };
+    let frame = Frame { plot: Rect { x0, y0, x1, y1 }, x_range, y_range };
     (frame, x_ticks, y_ticks)
 }
 
@@ -719,25 +648,8 @@ pub fn render(chart: &Chart, series: &[Series]) -> Result<RgbImage, PlotError> {
     // Grid and ticks.
     for &v in x_ticks.values.iter().filter(|&&v| inside(v, frame.x_range)) {
         let px = frame.px(v, frame.y_range.0).0.floor() as i64;
-        cv.fill_rect(
-            Rect {
-                x0: px,
-                x1: px + 1,
-                ..plot
-            },
-            GRID,
-            1.0,
-        );
-        cv.fill_rect(
-            Rect {
-                x0: px,
-                x1: px + 1,
-                y0: plot.y1,
-                y1: plot.y1 + 4,
-            },
-            AXIS,
-            1.0,
-        );
+        cv.fill_rect(Rect { x0: px, x1: px + 1, ..plot }, GRID, 1.0);
+        cv.fill_rect(Rect { x0: px, x1: px + 1, y0: plot.y1, y1: plot.y1 + 4 }, AXIS, 1.0);
         let label = format_tick(v, x_ticks.step);
         let tw = text_width(&label, 1);
         let lx = (px - tw / 2).clamp(0, (cv.w() - tw).max(0));
@@ -745,37 +657,15 @@ pub fn render(chart: &Chart, series: &[Series]) -> Result<RgbImage, PlotError> {
     }
     for &v in y_ticks.values.iter().filter(|&&v| inside(v, frame.y_range)) {
         let py = frame.px(frame.x_range.0, v).1.floor() as i64;
-        cv.fill_rect(
-            Rect {
-                y0: py,
-                y1: py + 1,
-                ..plot
-            },
-            GRID,
-            1.0,
-        );
-        cv.fill_rect(
-            Rect {
-                x0: plot.x0 - 4,
-                x1: plot.x0,
-                y0: py,
-                y1: py + 1,
-            },
-            AXIS,
-            1.0,
-        );
+        cv.fill_rect(Rect { y0: py, y1: py + 1, ..plot }, GRID, 1.0);
+        cv.fill_rect(Rect { x0: plot.x0 - 4, x1: plot.x0, y0: py, y1: py + 1 }, AXIS, 1.0);
         let label = format_tick(v, y_ticks.step);
         let tw = text_width(&label, 1);
         cv.text(plot.x0 - 8 - tw, py - GLYPH_H / 2, &label, 1, BLACK);
     }
 
     // Data: bands first, then lines, then markers, so that lines stay on top of every band.
-    let inner = Rect {
-        x0: plot.x0 + 1,
-        y0: plot.y0 + 1,
-        x1: plot.x1 - 1,
-        y1: plot.y1 - 1,
-    };
+    let inner = Rect { x0: plot.x0 + 1, y0: plot.y0 + 1, x1: plot.x1 - 1, y1: plot.y1 - 1 };
     for s in series {
         if let Some(band) = &s.band {
             draw_band(&mut cv, &frame, inner, s, band);
@@ -807,13 +697,7 @@ pub fn render(chart: &Chart, series: &[Series]) -> Result<RgbImage, PlotError> {
     if !chart.x_label.is_empty() {
         let tw = text_width(&chart.x_label, 1);
         let cx = (plot.x0 + plot.x1) / 2;
-        cv.text(
-            (cx - tw / 2).max(0),
-            plot.y1 + 8 + GLYPH_H + 10,
-            &chart.x_label,
-            1,
-            BLACK,
-        );
+        cv.text((cx - tw / 2).max(0), plot.y1 + 8 + GLYPH_H + 10, &chart.x_label, 1, BLACK);
     }
     if !chart.y_label.is_empty() {
         let tw = text_width(&chart.y_label, 1);
@@ -845,11 +729,7 @@ fn draw_band(cv: &mut Canvas, frame: &Frame, clip: Rect, s: &Series, band: &[f64
         let c1 = if last { c1 + 1 } else { c1 };
         for x in c0.max(clip.x0)..c1.min(clip.x1) {
             let span = b_lo.0 - a_lo.0;
-            let t = if span > 0.0 {
-                ((x as f64 + 0.5 - a_lo.0) / span).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
+            let t = if span > 0.0 { ((x as f64 + 0.5 - a_lo.0) / span).clamp(0.0, 1.0) } else { 0.0 };
             let top = a_hi.1 + t * (b_hi.1 - a_hi.1);
             let bot = a_lo.1 + t * (b_lo.1 - a_lo.1);
             let y0 = ((top - 0.5).round() as i64).max(clip.y0);
@@ -869,36 +749,15 @@ fn draw_legend(cv: &mut Canvas, plot: Rect, series: &[Series]) {
     let row_h = GLYPH_H + 9;
     let x0 = plot.x1 + 12;
     let y0 = plot.y0;
-    let r = Rect {
-        x0,
-        y0,
-        x1: x0 + width,
-        y1: y0 + 6 + row_h * series.len() as i64 + 2,
-    };
+    let r = Rect { x0, y0, x1: x0 + width, y1: y0 + 6 + row_h * series.len() as i64 + 2 };
     cv.rect_outline(r, [180, 180, 180]);
-    let clip = Rect {
-        x0: 0,
-        y0: 0,
-        x1: cv.w(),
-        y1: cv.h(),
-    };
+    let clip = Rect { x0: 0, y0: 0, x1: cv.w(), y1: cv.h() };
     for (i, s) in series.iter().enumerate() {
         let cy = y0 + 6 + row_h * i as i64 + GLYPH_H / 2;
         let sx = x0 + 8;
         let mid = cy as f64 + 0.5;
-        cv.line(
-            (sx as f64, mid),
-            ((sx + SWATCH_W) as f64, mid),
-            LINE_WIDTH,
-            s.color,
-            clip,
-        );
-        cv.disc(
-            ((sx + SWATCH_W / 2) as f64, mid),
-            MARKER_RADIUS,
-            s.color,
-            clip,
-        );
+        cv.line((sx as f64, mid), ((sx + SWATCH_W) as f64, mid), LINE_WIDTH, s.color, clip);
+        cv.disc(((sx + SWATCH_W / 2) as f64, mid), MARKER_RADIUS, s.color, clip);
         let label: String = s.label.chars().take(40).collect();
         cv.text(sx + SWATCH_W + 6, cy - GLYPH_H / 2, &label, 1, BLACK);
     }
@@ -911,32 +770,17 @@ pub fn write_png(path: &Path, chart: &Chart, series: &[Series]) -> Result<(), Pl
         && !dir.as_os_str().is_empty()
         && !dir.is_dir()
     {
-        return Err(PlotError::MissingDirectory {
-            path: path.to_path_buf(),
-            dir: dir.to_path_buf(),
-        });
+        return Err(PlotError::MissingDirectory { path: path.to_path_buf(), dir: dir.to_path_buf() });
     }
     let img = render(chart, series)?;
-    let file = File::create(path).map_err(|source| PlotError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let file = File::create(path).map_err(|source| PlotError::Io { path: path.to_path_buf(), source })?;
     let mut out = BufWriter::new(file);
     img.write_to(&mut out, ImageFormat::Png)
-        .map_err(|source| PlotError::Encode {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        .map_err(|source| PlotError::Encode { path: path.to_path_buf(), source })?;
     out.into_inner()
-        .map_err(|e| PlotError::Io {
-            path: path.to_path_buf(),
-            source: e.into_error(),
-        })?
+        .map_err(|e| PlotError::Io { path: path.to_path_buf(), source: e.into_error() })?
         .sync_all()
-        .map_err(|source| PlotError::Io {
-            path: path.to_path_buf(),
-            source,
-        })
+        .map_err(|source| PlotError::Io { path: path.to_path_buf(), source })
 }
 
 #[cfg(test)]
@@ -953,16 +797,9 @@ mod tests {
     fn check_ticks(min: f64, max: f64) {
         let t = nice_ticks(min, max, 6);
         let mantissa = t.step / 10f64.powf(t.step.log10().floor());
-        assert!(
-            [1.0, 2.0, 5.0].iter().any(|m| (mantissa - m).abs() < 1e-9),
-            "step {} for {min}..{max}",
-            t.step
-        );
+        assert!([1.0, 2.0, 5.0].iter().any(|m| (mantissa - m).abs() < 1e-9), "step {} for {min}..{max}", t.step);
         assert!(t.values.len() >= 2 && t.values.len() <= 13, "{t:?}");
-        assert!(
-            t.values[0] <= min + 1e-12 && *t.values.last().unwrap() >= max - 1e-12,
-            "{t:?}"
-        );
+        assert!(t.values[0] <= min + 1e-12 && *t.values.last().unwrap() >= max - 1e-12, "{t:?}");
         for w in t.values.windows(2) {
             assert!((w[1] - w[0] - t.step).abs() < t.step * 1e-9, "{t:?}");
         }
@@ -975,10 +812,7 @@ mod tests {
         check_ticks(-3.2, 7.9);
         check_ticks(0.001, 0.0042);
         check_ticks(-1e6, -2.0);
-        assert_eq!(
-            nice_ticks(0.0, 1.0, 5).values,
-            vec![0.0, 0.2, 0.4, 0.6, 0.8, 1.0]
-        );
+        assert_eq!(nice_ticks(0.0, 1.0, 5).values, vec![0.0, 0.2, 0.4, 0.6, 0.8, 1.0]);
         assert_eq!(nice_ticks(0.0, 5000.0, 5).step, 1000.0);
         let t = nice_ticks(-3.2, 7.9, 6);
         assert_eq!(t.step, 2.0);
@@ -1012,14 +846,7 @@ mod tests {
         assert!(glyph(' ').iter().all(|&r| r == 0));
         assert_eq!(glyph('é'), glyph('?'));
         // Distinct glyphs for characters that are easy to confuse.
-        for (a, b) in [
-            ('0', 'O'),
-            ('1', 'l'),
-            ('5', 'S'),
-            ('8', 'B'),
-            ('-', '_'),
-            ('.', ','),
-        ] {
+        for (a, b) in [('0', 'O'), ('1', 'l'), ('5', 'S'), ('8', 'B'), ('-', '_'), ('.', ',')] {
             assert_ne!(glyph(a), glyph(b), "{a} vs {b}");
         }
     }
@@ -1028,16 +855,9 @@ mod tests {
     fn png_decodes_at_the_requested_size() {
         let dir = scratch("size");
         let path = dir.join("curve.png");
-        let chart = Chart {
-            width: 640,
-            height: 400,
-            ..Chart::new("Block Picking", "environment steps", "success rate")
-        };
-        let s = Series::new(
-            "Equi SACfD",
-            palette(0),
-            vec![(0.0, 0.1), (1000.0, 0.5), (2000.0, 0.9)],
-        );
+        let chart =
+            Chart { width: 640, height: 400, ..Chart::new("Block Picking", "environment steps", "success rate") };
+        let s = Series::new("Equi SACfD", palette(0), vec![(0.0, 0.1), (1000.0, 0.5), (2000.0, 0.9)]);
         write_png(&path, &chart, &[s]).unwrap();
         let img = image::open(&path).unwrap();
         assert_eq!((img.width(), img.height()), (640, 400));
@@ -1045,10 +865,7 @@ mod tests {
 
     #[test]
     fn data_point_lands_where_it_should() {
-        let chart = Chart {
-            y_range: Some((0.0, 1.0)),
-            ..Chart::new("t", "x", "y")
-        };
+        let chart = Chart { y_range: Some((0.0, 1.0)), ..Chart::new("t", "x", "y") };
         let color = [200, 30, 40];
         let s = Series::new("s", color, vec![(0.0, 0.0), (5.0, 0.5), (10.0, 1.0)]);
         let img = render(&chart, std::slice::from_ref(&s)).unwrap();
@@ -1059,9 +876,7 @@ mod tests {
         // The mapping agrees with the plot rectangle: the middle of the data is the middle of the plot.
         assert!((px - (frame.plot.x0 + frame.plot.x1) / 2).abs() <= 1);
         assert!((py - (frame.plot.y0 + frame.plot.y1) / 2).abs() <= 1);
-        let found = (-2..=2).any(|dy| {
-            (-2..=2).any(|dx| img.get_pixel((px + dx) as u32, (py + dy) as u32).0 == color)
-        });
+        let found = (-2..=2).any(|dy| (-2..=2).any(|dx| img.get_pixel((px + dx) as u32, (py + dy) as u32).0 == color));
         assert!(found, "series colour not near ({px}, {py})");
         for y in 0..frame.plot.y0.min(20) as u32 {
             for x in 0..frame.plot.x0.min(20) as u32 {
@@ -1074,11 +889,7 @@ mod tests {
     fn nan_points_and_empty_series_are_skipped() {
         let s = Series {
             band: Some(vec![0.1, f64::NAN, 0.1, 0.2]),
-            ..Series::new(
-                "with gaps",
-                palette(1),
-                vec![(0.0, 0.2), (1.0, f64::NAN), (f64::NAN, 0.3), (3.0, 0.6)],
-            )
+            ..Series::new("with gaps", palette(1), vec![(0.0, 0.2), (1.0, f64::NAN), (f64::NAN, 0.3), (3.0, 0.6)])
         };
         let empty = Series::new("empty", palette(2), vec![]);
         let all_nan = Series::new("nan", palette(3), vec![(f64::NAN, f64::NAN)]);
@@ -1094,27 +905,12 @@ mod tests {
         let err = write_png(&path, &Chart::default(), &[]).unwrap_err();
         assert!(matches!(err, PlotError::MissingDirectory { .. }));
         assert!(err.to_string().contains("no_such_dir"), "{err}");
-        let s = Series {
-            band: Some(vec![0.1]),
-            ..Series::new("short band", palette(0), vec![(0.0, 0.0), (1.0, 1.0)])
-        };
+        let s = Series { band: Some(vec![0.1]), ..Series::new("short band", palette(0), vec![(0.0, 0.0), (1.0, 1.0)]) };
         let err = render(&Chart::default(), &[s]).unwrap_err();
         assert!(err.to_string().contains("short band"), "{err}");
-        let chart = Chart {
-            y_range: Some((1.0, 1.0)),
-            ..Chart::default()
-        };
-        assert!(matches!(
-            render(&chart, &[]),
-            Err(PlotError::BadYRange { .. })
-        ));
-        let chart = Chart {
-            width: 0,
-            ..Chart::default()
-        };
-        assert!(matches!(
-            render(&chart, &[]),
-            Err(PlotError::BadSize { .. })
-        ));
+        let chart = Chart { y_range: Some((1.0, 1.0)), ..Chart::default() };
+        assert!(matches!(render(&chart, &[]), Err(PlotError::BadYRange { .. })));
+        let chart = Chart { width: 0, ..Chart::default() };
+        assert!(matches!(render(&chart, &[]), Err(PlotError::BadSize { .. })));
     }
 }

@@ -55,20 +55,10 @@ impl Progress {
     /// rate limit allows.
     pub fn update(&mut self, done: u64, fields: &[(&str, String)]) {
         self.done = done;
-        self.fields = fields
-            .iter()
-            .map(|(k, v)| (k.to_string(), v.clone()))
-            .collect();
+        self.fields = fields.iter().map(|(k, v)| (k.to_string(), v.clone())).collect();
         let now = Instant::now();
-        let interval = if self.interactive {
-            TTY_INTERVAL
-        } else {
-            LOG_INTERVAL
-        };
-        if self
-            .last_draw
-            .is_none_or(|t| now.duration_since(t) >= interval)
-        {
+        let interval = if self.interactive { TTY_INTERVAL } else { LOG_INTERVAL };
+        if self.last_draw.is_none_or(|t| now.duration_since(t) >= interval) {
             self.last_draw = Some(now);
             self.draw(false);
         }
@@ -83,11 +73,7 @@ impl Progress {
     }
 
     fn draw(&mut self, last: bool) {
-        let fields: Vec<(&str, String)> = self
-            .fields
-            .iter()
-            .map(|(k, v)| (k.as_str(), v.clone()))
-            .collect();
+        let fields: Vec<(&str, String)> = self.fields.iter().map(|(k, v)| (k.as_str(), v.clone())).collect();
         let line = self.render(self.done, &fields, self.start.elapsed());
         let mut err = std::io::stderr().lock();
         // Progress output is best effort: a closed stderr must not stop training.
@@ -115,11 +101,7 @@ impl Progress {
         } else {
             ((done.min(total) as u128 * BAR_WIDTH as u128) / total as u128) as usize
         };
-        let percent = if total == 0 {
-            100
-        } else {
-            (done.min(total) as u128 * 100 / total as u128) as u64
-        };
+        let percent = if total == 0 { 100 } else { (done.min(total) as u128 * 100 / total as u128) as u64 };
         let mut s = format!(
             "[{}{}] {percent:>3}% {done}/{total} {}",
             "#".repeat(filled),
@@ -133,10 +115,7 @@ impl Progress {
                 s.push_str(&format!(" | {name} {value}"));
             }
         }
-        s.push_str(&format!(
-            " | {} elapsed",
-            format_duration(elapsed.as_secs())
-        ));
+        s.push_str(&format!(" | {} elapsed", format_duration(elapsed.as_secs())));
         if done == 0 && total > 0 {
             s.push_str(", ETA --:--");
         } else if done < total {
@@ -154,11 +133,7 @@ impl Progress {
 /// `MM:SS` below an hour, `H:MM:SS` from one hour on.
 fn format_duration(secs: u64) -> String {
     let (h, m, s) = (secs / 3600, secs / 60 % 60, secs % 60);
-    if h > 0 {
-        format!("{h}:{m:02}:{s:02}")
-    } else {
-        format!("{m:02}:{s:02}")
-    }
+    if h > 0 { format!("{h}:{m:02}:{s:02}") } else { format!("{m:02}:{s:02}") }
 }
 
 #[cfg(test)]
@@ -179,39 +154,23 @@ mod tests {
         }
         let line = p.render(2500, &[], Duration::from_secs(10));
         assert_eq!(bar(&line), "##########..........");
-        assert_eq!(
-            bar(&p.render(7000, &[], Duration::ZERO)),
-            "#".repeat(BAR_WIDTH)
-        );
+        assert_eq!(bar(&p.render(7000, &[], Duration::ZERO)), "#".repeat(BAR_WIDTH));
     }
 
     #[test]
     fn percentages_at_zero_and_total() {
         let p = Progress::new(5000, "updates");
         let start = p.render(0, &[], Duration::ZERO);
-        assert_eq!(
-            start,
-            "[....................]   0% 0/5000 updates | 00:00 elapsed, ETA --:--"
-        );
+        assert_eq!(start, "[....................]   0% 0/5000 updates | 00:00 elapsed, ETA --:--");
         let end = p.render(5000, &[], Duration::from_secs(201));
-        assert_eq!(
-            end,
-            "[####################] 100% 5000/5000 updates | 03:21 elapsed"
-        );
-        assert!(
-            p.render(4999, &[], Duration::from_secs(1))
-                .contains(" 99% ")
-        );
+        assert_eq!(end, "[####################] 100% 5000/5000 updates | 03:21 elapsed");
+        assert!(p.render(4999, &[], Duration::from_secs(1)).contains(" 99% "));
     }
 
     #[test]
     fn fields_and_eta_are_formatted() {
         let p = Progress::new(5000, "updates");
-        let fields = [
-            ("SPS", "45.6".to_string()),
-            ("eval", "0.80".to_string()),
-            ("", "warm-up".into()),
-        ];
+        let fields = [("SPS", "45.6".to_string()), ("eval", "0.80".to_string()), ("", "warm-up".into())];
         let line = p.render(1000, &fields, Duration::from_secs(100));
         assert_eq!(
             line,
@@ -233,10 +192,7 @@ mod tests {
         assert!(p.render(1, &[], Duration::ZERO).ends_with("ETA 00:00"));
         let empty = Progress::new(0, "updates");
         let line = empty.render(0, &[], Duration::ZERO);
-        assert!(
-            line.starts_with("[####################] 100% 0/0 updates"),
-            "{line}"
-        );
+        assert!(line.starts_with("[####################] 100% 0/0 updates"), "{line}");
         assert!(!line.contains("NaN") && !line.contains("inf"));
     }
 }

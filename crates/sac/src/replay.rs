@@ -44,9 +44,7 @@ pub enum ReplayError {
         reason: &'static str,
     },
     /// The buffer is full and every slot holds an expert transition, so nothing may be evicted.
-    #[error(
-        "replay buffer is full of expert transitions ({capacity} slots); nothing can be overwritten"
-    )]
+    #[error("replay buffer is full of expert transitions ({capacity} slots); nothing can be overwritten")]
     AllExpert {
         /// The buffer's capacity.
         capacity: usize,
@@ -152,19 +150,9 @@ impl Default for ReplayConfig {
 impl ReplayConfig {
     /// Checks every field; the error names the first bad one.
     pub fn validate(&self) -> Result<(), ReplayError> {
-        let bad = |field, value: String, reason| {
-            Err(ReplayError::Config {
-                field,
-                value,
-                reason,
-            })
-        };
+        let bad = |field, value: String, reason| Err(ReplayError::Config { field, value, reason });
         if self.capacity == 0 || self.capacity > MAX_CAPACITY {
-            return bad(
-                "capacity",
-                self.capacity.to_string(),
-                "must be in 1..=16777216",
-            );
+            return bad("capacity", self.capacity.to_string(), "must be in 1..=16777216");
         }
         if !(self.alpha.is_finite() && self.alpha >= 0.0) {
             return bad("alpha", self.alpha.to_string(), "must be finite and >= 0");
@@ -175,18 +163,10 @@ impl ReplayConfig {
             }
         }
         if !(self.priority_eps.is_finite() && self.priority_eps > 0.0) {
-            return bad(
-                "priority_eps",
-                self.priority_eps.to_string(),
-                "must be finite and > 0",
-            );
+            return bad("priority_eps", self.priority_eps.to_string(), "must be finite and > 0");
         }
         if !(self.expert_bonus.is_finite() && self.expert_bonus >= 0.0) {
-            return bad(
-                "expert_bonus",
-                self.expert_bonus.to_string(),
-                "must be finite and >= 0",
-            );
+            return bad("expert_bonus", self.expert_bonus.to_string(), "must be finite and >= 0");
         }
         Ok(())
     }
@@ -194,21 +174,13 @@ impl ReplayConfig {
     /// β at training progress `progress` ∈ [0, 1] (clamped; NaN counts as 0), linear from
     /// `beta_start` to `beta_end`.
     pub fn beta(&self, progress: f64) -> f64 {
-        let p = if progress.is_nan() {
-            0.0
-        } else {
-            progress.clamp(0.0, 1.0)
-        };
+        let p = if progress.is_nan() { 0.0 } else { progress.clamp(0.0, 1.0) };
         self.beta_start + (self.beta_end - self.beta_start) * p
     }
 
     /// The β schedule over `steps` training steps as a [`Linear`].
     pub fn beta_schedule(&self, steps: u64) -> Linear {
-        Linear {
-            start: self.beta_start,
-            end: self.beta_end,
-            steps,
-        }
+        Linear { start: self.beta_start, end: self.beta_end, steps }
     }
 }
 
@@ -249,11 +221,7 @@ struct Trees {
 impl Trees {
     fn new(capacity: usize) -> Trees {
         let leaves = capacity.next_power_of_two();
-        Trees {
-            leaves,
-            sum: vec![0.0; 2 * leaves],
-            min: vec![f64::INFINITY; 2 * leaves],
-        }
+        Trees { leaves, sum: vec![0.0; 2 * leaves], min: vec![f64::INFINITY; 2 * leaves] }
     }
 
     fn set(&mut self, slot: usize, value: f64) {
@@ -337,16 +305,10 @@ impl Replay {
     /// only expert transitions ([`ReplayError::AllExpert`]). Nothing changes on error.
     pub fn push(&mut self, t: Stored) -> Result<usize, ReplayError> {
         if !t.reward.is_finite() {
-            return Err(ReplayError::NonFinite {
-                what: "reward".into(),
-                value: t.reward,
-            });
+            return Err(ReplayError::NonFinite { what: "reward".into(), value: t.reward });
         }
         if let Some(k) = t.action.iter().position(|a| !a.is_finite()) {
-            return Err(ReplayError::NonFinite {
-                what: format!("action[{k}]"),
-                value: t.action[k],
-            });
+            return Err(ReplayError::NonFinite { what: format!("action[{k}]"), value: t.action[k] });
         }
         let cap = self.cfg.capacity;
         let p = self.max_priority;
@@ -380,12 +342,7 @@ impl Replay {
     /// weights for exponent `beta`. `batch = 0` gives an empty sample.
     ///
     /// Errors: empty buffer, β outside [0, 1], or a total mass that is zero or not finite.
-    pub fn sample(
-        &self,
-        batch: usize,
-        beta: f64,
-        rng: &mut impl rand::Rng,
-    ) -> Result<Sample, ReplayError> {
+    pub fn sample(&self, batch: usize, beta: f64, rng: &mut impl rand::Rng) -> Result<Sample, ReplayError> {
         if self.slots.is_empty() {
             return Err(ReplayError::Empty);
         }
@@ -417,23 +374,13 @@ impl Replay {
     ///
     /// Errors (nothing is updated): lengths differ, a slot is not filled, or a TD error is not
     /// finite or gives a non-finite p^α.
-    pub fn update_priorities(
-        &mut self,
-        slots: &[usize],
-        td_abs: &[f32],
-    ) -> Result<(), ReplayError> {
+    pub fn update_priorities(&mut self, slots: &[usize], td_abs: &[f32]) -> Result<(), ReplayError> {
         if slots.len() != td_abs.len() {
-            return Err(ReplayError::LengthMismatch {
-                slots: slots.len(),
-                td: td_abs.len(),
-            });
+            return Err(ReplayError::LengthMismatch { slots: slots.len(), td: td_abs.len() });
         }
         let mut new = Vec::with_capacity(slots.len());
         for (&slot, &td) in slots.iter().zip(td_abs) {
-            let stored = self.slots.get(slot).ok_or(ReplayError::SlotOutOfRange {
-                slot,
-                len: self.slots.len(),
-            })?;
+            let stored = self.slots.get(slot).ok_or(ReplayError::SlotOutOfRange { slot, len: self.slots.len() })?;
             let p = self.raw_priority(td, stored.expert);
             let pa = p.powf(self.cfg.alpha);
             if !(td.is_finite() && p.is_finite() && pa.is_finite()) {
@@ -531,11 +478,7 @@ impl Replay {
         let mut tmp = path.as_os_str().to_owned();
         tmp.push(".tmp");
         let tmp = PathBuf::from(tmp);
-        let io_err = |op, source| ReplayError::Io {
-            path: tmp.clone(),
-            op,
-            source,
-        };
+        let io_err = |op, source| ReplayError::Io { path: tmp.clone(), op, source };
         let file = File::create(&tmp).map_err(|e| io_err("creating", e))?;
         let result = self.write_to(file);
         let file = match result {
@@ -556,11 +499,7 @@ impl Replay {
             source,
         })?;
         let bytes = std::fs::metadata(path)
-            .map_err(|source| ReplayError::Io {
-                path: path.to_owned(),
-                op: "reading metadata of",
-                source,
-            })?
+            .map_err(|source| ReplayError::Io { path: path.to_owned(), op: "reading metadata of", source })?
             .len();
         Ok(bytes)
     }
@@ -632,29 +571,18 @@ impl Replay {
     /// Errors name the file and what was wrong: wrong magic, unsupported version, truncation,
     /// checksum or decompression failure, or a value out of range.
     pub fn load(path: &Path) -> Result<Replay, ReplayError> {
-        let file = File::open(path).map_err(|source| ReplayError::Io {
-            path: path.to_owned(),
-            op: "opening",
-            source,
-        })?;
+        let file =
+            File::open(path).map_err(|source| ReplayError::Io { path: path.to_owned(), op: "opening", source })?;
         let mut r = BufReader::with_capacity(1 << 20, file);
-        let fmt = |reason: String| ReplayError::Format {
-            path: path.to_owned(),
-            reason,
-        };
+        let fmt = |reason: String| ReplayError::Format { path: path.to_owned(), reason };
         let mut head = [0u8; 12];
         read_exact(&mut r, &mut head, "header").map_err(fmt)?;
         if &head[..8] != MAGIC {
-            return Err(fmt(format!(
-                "not a replay checkpoint (magic bytes {:02x?})",
-                &head[..8]
-            )));
+            return Err(fmt(format!("not a replay checkpoint (magic bytes {:02x?})", &head[..8])));
         }
         let version = u32::from_le_bytes([head[8], head[9], head[10], head[11]]);
         if version != VERSION {
-            return Err(fmt(format!(
-                "format version {version} is not supported (this build reads {VERSION})"
-            )));
+            return Err(fmt(format!("format version {version} is not supported (this build reads {VERSION})")));
         }
         let z = zstd::Decoder::with_buffer(r).map_err(|e| fmt(format!("starting zstd: {e}")))?;
         read_body(z).map_err(fmt)
@@ -727,30 +655,23 @@ fn get_count(r: &mut impl Read, what: &str, max: u64) -> Result<usize, String> {
 fn read_body(mut r: impl Read) -> Result<Replay, String> {
     let json_len = get_u32(&mut r, "config length")? as usize;
     if json_len > MAX_CONFIG_JSON {
-        return Err(format!(
-            "config length {json_len} exceeds {MAX_CONFIG_JSON}"
-        ));
+        return Err(format!("config length {json_len} exceeds {MAX_CONFIG_JSON}"));
     }
     let mut json = vec![0u8; json_len];
     read_exact(&mut r, &mut json, "config")?;
-    let cfg: ReplayConfig =
-        serde_json::from_slice(&json).map_err(|e| format!("config JSON: {e}"))?;
+    let cfg: ReplayConfig = serde_json::from_slice(&json).map_err(|e| format!("config JSON: {e}"))?;
     let mut replay = Replay::new(cfg).map_err(|e| e.to_string())?;
     let cap = replay.cfg.capacity;
 
     let len = get_count(&mut r, "transition count", cap as u64)?;
     let next = get_count(&mut r, "ring pointer", cap as u64 - 1)?;
     if len < cap && next != len {
-        return Err(format!(
-            "ring pointer {next} with {len} of {cap} slots filled"
-        ));
+        return Err(format!("ring pointer {next} with {len} of {cap} slots filled"));
     }
     let expert_len = get_count(&mut r, "expert count", len as u64)?;
     let max_priority = get_f64(&mut r, "max priority")?;
     if !(max_priority.is_finite() && max_priority >= 1.0) {
-        return Err(format!(
-            "max priority {max_priority} is not finite and >= 1"
-        ));
+        return Err(format!("max priority {max_priority} is not finite and >= 1"));
     }
 
     let n_frames = get_count(&mut r, "frame count", 2 * len as u64)?;
@@ -759,22 +680,15 @@ fn read_body(mut r: impl Read) -> Result<Replay, String> {
     for i in 0..n_frames {
         let size = get_u32(&mut r, "frame size")? as usize;
         if size == 0 || size > Frame::MAX_SIZE {
-            return Err(format!(
-                "frame {i}: size {size} outside 1..={}",
-                Frame::MAX_SIZE
-            ));
+            return Err(format!("frame {i}: size {size} outside 1..={}", Frame::MAX_SIZE));
         }
         let holding = get_bool(&mut r, "frame holding flag")?;
         let mut color = vec![0u8; size * size * 3];
         read_exact(&mut r, &mut color, "frame colour")?;
         depth_bytes.resize(size * size * 2, 0);
         read_exact(&mut r, &mut depth_bytes, "frame depth")?;
-        let depth = depth_bytes
-            .chunks_exact(2)
-            .map(|b| f16::from_bits(u16::from_le_bytes([b[0], b[1]])))
-            .collect();
-        let frame =
-            Frame::from_f16(size, color, depth, holding).map_err(|e| format!("frame {i}: {e}"))?;
+        let depth = depth_bytes.chunks_exact(2).map(|b| f16::from_bits(u16::from_le_bytes([b[0], b[1]]))).collect();
+        let frame = Frame::from_f16(size, color, depth, holding).map_err(|e| format!("frame {i}: {e}"))?;
         frames.push(Arc::new(frame));
     }
 
@@ -782,10 +696,7 @@ fn read_body(mut r: impl Read) -> Result<Replay, String> {
     for slot in 0..len {
         let mut frame = |what| -> Result<Arc<Frame>, String> {
             let k = get_u32(&mut r, what)? as usize;
-            frames
-                .get(k)
-                .cloned()
-                .ok_or_else(|| format!("slot {slot}: {what} index {k} >= frame count {n_frames}"))
+            frames.get(k).cloned().ok_or_else(|| format!("slot {slot}: {what} index {k} >= frame count {n_frames}"))
         };
         let obs = frame("obs frame")?;
         let next_obs = frame("next_obs frame")?;
@@ -798,27 +709,16 @@ fn read_body(mut r: impl Read) -> Result<Replay, String> {
         let expert = get_bool(&mut r, "expert flag")?;
         let p = get_f64(&mut r, "priority")?;
         if !(p.is_finite() && p > 0.0 && p <= max_priority) {
-            return Err(format!(
-                "slot {slot}: priority {p} not in (0, max priority {max_priority}]"
-            ));
+            return Err(format!("slot {slot}: priority {p} not in (0, max priority {max_priority}]"));
         }
         seen_expert += usize::from(expert);
-        let t = Stored {
-            obs,
-            next_obs,
-            action,
-            reward,
-            done,
-            expert,
-        };
+        let t = Stored { obs, next_obs, action, reward, done, expert };
         replay.push(t).map_err(|e| format!("slot {slot}: {e}"))?;
         replay.priorities[slot] = p;
         replay.trees.set(slot, p.powf(replay.cfg.alpha));
     }
     if seen_expert != expert_len {
-        return Err(format!(
-            "expert count {expert_len} but {seen_expert} expert transitions"
-        ));
+        return Err(format!("expert count {expert_len} but {seen_expert} expert transitions"));
     }
     let trailer: [u8; 8] = get(&mut r, "trailer")?;
     if &trailer != TRAILER {
@@ -862,15 +762,8 @@ mod tests {
             let width = 16 >> depth;
             let first = (n - (1 << depth)) * width;
             let s: f64 = leaf[first..first + width].iter().sum();
-            assert!(
-                (t.sum[n] - s).abs() <= 1e-12 * s.max(1.0),
-                "sum at node {n}: {} vs {s}",
-                t.sum[n]
-            );
-            let m = leaf_min[first..first + width]
-                .iter()
-                .copied()
-                .fold(f64::INFINITY, f64::min);
+            assert!((t.sum[n] - s).abs() <= 1e-12 * s.max(1.0), "sum at node {n}: {} vs {s}", t.sum[n]);
+            let m = leaf_min[first..first + width].iter().copied().fold(f64::INFINITY, f64::min);
             assert_eq!(t.min[n], m, "min at node {n}");
         }
     }

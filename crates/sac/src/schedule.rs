@@ -48,29 +48,13 @@ mod tests {
 
     #[test]
     fn linear_interpolates_then_clamps() {
-        let beta = Linear {
-            start: 0.4,
-            end: 1.0,
-            steps: 5000,
-        };
+        let beta = Linear { start: 0.4, end: 1.0, steps: 5000 };
         assert_eq!(beta.value(0), 0.4);
         assert!((beta.value(2500) - 0.7).abs() < 1e-12);
         assert_eq!(beta.value(5000), 1.0);
         assert_eq!(beta.value(1_000_000), 1.0);
-        assert_eq!(
-            Linear {
-                start: 0.4,
-                end: 1.0,
-                steps: 0
-            }
-            .value(0),
-            1.0
-        );
-        let down = Linear {
-            start: 1.0,
-            end: 0.0,
-            steps: 4,
-        };
+        assert_eq!(Linear { start: 0.4, end: 1.0, steps: 0 }.value(0), 1.0);
+        let down = Linear { start: 1.0, end: 0.0, steps: 4 };
         assert_eq!(down.value(1), 0.75);
     }
 

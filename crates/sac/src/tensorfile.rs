@@ -26,7 +26,11 @@ pub struct TensorFile {
 }
 
 /// Write `tensors` and `meta` to `path` (through `path.tmp` and a rename).
-pub fn write(path: &Path, tensors: &[(String, Vec<usize>, Vec<f32>)], meta: &[(String, String)]) -> std::io::Result<()> {
+pub fn write(
+    path: &Path,
+    tensors: &[(String, Vec<usize>, Vec<f32>)],
+    meta: &[(String, String)],
+) -> std::io::Result<()> {
     let mut header = serde_json::Map::new();
     let m: serde_json::Map<String, serde_json::Value> =
         meta.iter().map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone()))).collect();
@@ -64,9 +68,12 @@ pub fn read(path: &Path) -> Result<TensorFile, ReadError> {
         return Err(bad("shorter than the 8-byte header length: not a safetensors file"));
     }
     let n = u64::from_le_bytes(bytes[..8].try_into().unwrap_or_default()) as usize;
-    let body_start = 8usize.checked_add(n).filter(|&e| e <= bytes.len()).ok_or_else(|| bad("header length runs past the end of the file"))?;
-    let header: serde_json::Value =
-        serde_json::from_slice(&bytes[8..body_start]).map_err(|e| ReadError::Format(format!("header is not JSON: {e}")))?;
+    let body_start = 8usize
+        .checked_add(n)
+        .filter(|&e| e <= bytes.len())
+        .ok_or_else(|| bad("header length runs past the end of the file"))?;
+    let header: serde_json::Value = serde_json::from_slice(&bytes[8..body_start])
+        .map_err(|e| ReadError::Format(format!("header is not JSON: {e}")))?;
     let obj = header.as_object().ok_or_else(|| bad("header is not a JSON object"))?;
     let body = &bytes[body_start..];
     let mut meta = BTreeMap::new();
@@ -88,7 +95,10 @@ pub fn read(path: &Path) -> Result<TensorFile, ReadError> {
             .map_err(|e| ReadError::Format(format!("tensor `{name}` data_offsets: {e}")))?;
         let count = shape.iter().try_fold(1usize, |a, &d| a.checked_mul(d));
         if off[0] > off[1] || off[1] > body.len() || count.map(|c| c * 4) != Some(off[1] - off[0]) {
-            return Err(ReadError::Format(format!("tensor `{name}`: data offsets {off:?} do not fit shape {shape:?} in a body of {} bytes", body.len())));
+            return Err(ReadError::Format(format!(
+                "tensor `{name}`: data offsets {off:?} do not fit shape {shape:?} in a body of {} bytes",
+                body.len()
+            )));
         }
         let data = body[off[0]..off[1]].chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
         tensors.push((name.clone(), shape, data));

@@ -91,7 +91,10 @@ pub fn env_config(cfg: &TrainConfig) -> EnvConfig {
 /// A simulator observation as a stored frame.
 pub fn frame_of(obs: &Observation) -> Result<Arc<Frame>, TrainError> {
     if obs.width != obs.height {
-        return Err(TrainError::Io { path: PathBuf::new(), message: format!("frame is {}×{}, must be square", obs.width, obs.height) });
+        return Err(TrainError::Io {
+            path: PathBuf::new(),
+            message: format!("frame is {}×{}, must be square", obs.width, obs.height),
+        });
     }
     Ok(Arc::new(Frame::new(obs.width, obs.color.clone(), &obs.depth, obs.holding)?))
 }
@@ -288,7 +291,16 @@ pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Resu
             let mut env = Env::new(env_cfg.clone())?;
             let seed = episode_seed(cfg.seed, i as u32, 0);
             let o = env.reset(seed)?;
-            slots.push(Slot { env, index: i as u32, episode: 0, seed, actions: Vec::new(), obs: frame_of(&o)?, ret: 0.0, disc: 0.0 });
+            slots.push(Slot {
+                env,
+                index: i as u32,
+                episode: 0,
+                seed,
+                actions: Vec::new(),
+                obs: frame_of(&o)?,
+                ret: 0.0,
+                disc: 0.0,
+            });
         }
     }
 
@@ -310,16 +322,27 @@ pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Resu
             global_step += 1;
             let next = frame_of(&r.observation)?;
             let terminal = r.info.success || r.info.invalid || (r.info.timeout && cfg.timeout_terminal);
-            learner.push(Stored { obs: slot.obs.clone(), next_obs: next.clone(), action: a, reward: r.reward, done: terminal, expert: false })?;
+            learner.push(Stored {
+                obs: slot.obs.clone(),
+                next_obs: next.clone(),
+                action: a,
+                reward: r.reward,
+                done: terminal,
+                expert: false,
+            })?;
             if r.done {
                 let w = wall(&started);
                 metrics
-                    .log(global_step, w, &[
-                        ("charts/episodic_return", slot.ret),
-                        ("charts/discounted_return", slot.disc),
-                        ("charts/episodic_length", slot.actions.len() as f64),
-                        ("charts/success", r.info.success as u8 as f64),
-                    ])
+                    .log(
+                        global_step,
+                        w,
+                        &[
+                            ("charts/episodic_return", slot.ret),
+                            ("charts/discounted_return", slot.disc),
+                            ("charts/episodic_length", slot.actions.len() as f64),
+                            ("charts/success", r.info.success as u8 as f64),
+                        ],
+                    )
                     .map_err(|e| io(&opts.run_dir, &e))?;
                 slot.episode += 1;
                 slot.seed = episode_seed(cfg.seed, slot.index, slot.episode);
@@ -347,13 +370,17 @@ pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Resu
         if cfg.eval_every > 0 && u % cfg.eval_every == 0 {
             let e = evaluate(&mut learner, &mut eval_envs, cfg.eval_episodes)?;
             metrics
-                .log(global_step, wall(&started), &[
-                    ("eval/success_rate", e.success_rate),
-                    ("eval/discounted_return", e.discounted_return),
-                    ("eval/episodic_return", e.mean_return),
-                    ("eval/episodic_length", e.mean_length),
-                    ("eval/updates", u as f64),
-                ])
+                .log(
+                    global_step,
+                    wall(&started),
+                    &[
+                        ("eval/success_rate", e.success_rate),
+                        ("eval/discounted_return", e.discounted_return),
+                        ("eval/episodic_return", e.mean_return),
+                        ("eval/episodic_length", e.mean_length),
+                        ("eval/updates", u as f64),
+                    ],
+                )
                 .map_err(|e| io(&opts.run_dir, &e))?;
             evals.push(e);
             write_curve(&opts.run_dir, &cfg, &evals)?;
@@ -377,7 +404,15 @@ pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Resu
     if u >= total && cfg.eval_every > 0 && evals.last().map(|e| e.updates) != Some(u) {
         let e = evaluate(&mut learner, &mut eval_envs, cfg.eval_episodes)?;
         metrics
-            .log(global_step, wall(&started), &[("eval/success_rate", e.success_rate), ("eval/discounted_return", e.discounted_return), ("eval/updates", u as f64)])
+            .log(
+                global_step,
+                wall(&started),
+                &[
+                    ("eval/success_rate", e.success_rate),
+                    ("eval/discounted_return", e.discounted_return),
+                    ("eval/updates", u as f64),
+                ],
+            )
             .map_err(|e| io(&opts.run_dir, &e))?;
         evals.push(e);
         write_curve(&opts.run_dir, &cfg, &evals)?;
@@ -386,7 +421,15 @@ pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Resu
         last_ck = Some(checkpoint(&learner, &slots, global_step, &evals, wall(&started), &opts.run_dir)?);
     }
     write_json(&opts.run_dir.join("evals.json"), &evals).map_err(|e| io(&opts.run_dir, &e))?;
-    Ok(RunSummary { run_dir: opts.run_dir.clone(), evals, global_step, updates: u, wall_s: started.elapsed().as_secs_f64(), last_checkpoint: last_ck, demos })
+    Ok(RunSummary {
+        run_dir: opts.run_dir.clone(),
+        evals,
+        global_step,
+        updates: u,
+        wall_s: started.elapsed().as_secs_f64(),
+        last_checkpoint: last_ck,
+        demos,
+    })
 }
 
 /// Run the expert in one env until `demo_episodes` episodes succeeded; store their transitions
@@ -410,7 +453,14 @@ pub fn collect_demos(learner: &mut Learner, env_cfg: &EnvConfig) -> Result<(usiz
             let r = env.step(&Action::from_normalized(a))?;
             let next = frame_of(&r.observation)?;
             let terminal = r.info.success || r.info.invalid || (r.info.timeout && cfg.timeout_terminal);
-            episode.push(Stored { obs: obs.clone(), next_obs: next.clone(), action: a, reward: r.reward, done: terminal, expert: true });
+            episode.push(Stored {
+                obs: obs.clone(),
+                next_obs: next.clone(),
+                action: a,
+                reward: r.reward,
+                done: terminal,
+                expert: true,
+            });
             if r.done {
                 if r.info.success {
                     kept += 1;
@@ -432,11 +482,23 @@ pub fn step_dir_name(updates: u64) -> String {
     format!("step_{updates:07}")
 }
 
-fn checkpoint(learner: &Learner, slots: &[Slot], global_step: u64, evals: &[EvalResult], wall_time: f64, run_dir: &Path) -> Result<PathBuf, TrainError> {
+fn checkpoint(
+    learner: &Learner,
+    slots: &[Slot],
+    global_step: u64,
+    evals: &[EvalResult],
+    wall_time: f64,
+    run_dir: &Path,
+) -> Result<PathBuf, TrainError> {
     let root = run_dir.join("checkpoints");
     let dir = root.join(step_dir_name(learner.updates()));
     learner.save(&dir)?;
-    let st = LoopState { envs: slots.iter().map(|s| (s.episode, s.actions.clone())).collect(), global_step, evals: evals.to_vec(), wall_time };
+    let st = LoopState {
+        envs: slots.iter().map(|s| (s.episode, s.actions.clone())).collect(),
+        global_step,
+        evals: evals.to_vec(),
+        wall_time,
+    };
     let io = |e: String| TrainError::Io { path: dir.clone(), message: e };
     write_json(&dir.join("loop.json"), &st).map_err(io)?;
     write_latest(run_dir, learner.updates())?;
@@ -495,12 +557,17 @@ impl RunDirLock {
                 let who = if owner.is_empty() { String::new() } else { format!(" (pid {owner})") };
                 return Err(io(
                     run_dir,
-                    format!("the run directory is in use by another training process{who}: wait for it to end or choose another --run-dir"),
+                    format!(
+                        "the run directory is in use by another training process{who}: wait for it to end or choose another --run-dir"
+                    ),
                 ));
             }
             // A filesystem without file locks (some network mounts): run unguarded, as before.
             Err(std::fs::TryLockError::Error(e)) if e.kind() == std::io::ErrorKind::Unsupported => {
-                log::warn!("{}: file locks are not supported here ({e}); not guarding the run directory", path.display());
+                log::warn!(
+                    "{}: file locks are not supported here ({e}); not guarding the run directory",
+                    path.display()
+                );
             }
             Err(std::fs::TryLockError::Error(e)) => return Err(io(&path, format!("cannot lock: {e}"))),
         }
@@ -566,8 +633,10 @@ pub fn find_checkpoint(path: &Path) -> Result<PathBuf, TrainError> {
         return Ok(path.to_path_buf());
     }
     let latest = path.join("checkpoints").join("latest");
-    let name = std::fs::read_to_string(&latest)
-        .map_err(|e| TrainError::Io { path: latest.clone(), message: format!("{e} (not a checkpoint directory nor a run directory with checkpoints)") })?;
+    let name = std::fs::read_to_string(&latest).map_err(|e| TrainError::Io {
+        path: latest.clone(),
+        message: format!("{e} (not a checkpoint directory nor a run directory with checkpoints)"),
+    })?;
     Ok(path.join("checkpoints").join(name.trim()))
 }
 
@@ -575,8 +644,18 @@ pub fn find_checkpoint(path: &Path) -> Result<PathBuf, TrainError> {
 pub fn write_curve(run_dir: &Path, cfg: &TrainConfig, evals: &[EvalResult]) -> Result<(), TrainError> {
     use crate::plot::{Chart, Series, palette, write_png};
     let series = vec![
-        Series { label: "success rate".into(), color: palette(0), points: evals.iter().map(|e| (e.updates as f64, e.success_rate)).collect(), band: None },
-        Series { label: "discounted return".into(), color: palette(1), points: evals.iter().map(|e| (e.updates as f64, e.discounted_return)).collect(), band: None },
+        Series {
+            label: "success rate".into(),
+            color: palette(0),
+            points: evals.iter().map(|e| (e.updates as f64, e.success_rate)).collect(),
+            band: None,
+        },
+        Series {
+            label: "discounted return".into(),
+            color: palette(1),
+            points: evals.iter().map(|e| (e.updates as f64, e.discounted_return)).collect(),
+            band: None,
+        },
     ];
     let chart = Chart {
         title: format!("{} SAC, {} ({} eval episodes)", cfg.agent.model.name(), cfg.task, cfg.eval_episodes),
@@ -621,7 +700,10 @@ mod tests {
         std::fs::write(dir.join("metrics.csv"), "global_step,wall_time,name,value\n").unwrap();
         std::fs::create_dir_all(dir.join("checkpoints")).unwrap();
         let e = RunDirLock::acquire_new(&dir, false).unwrap_err().to_string();
-        assert!(e.contains(&*dir.to_string_lossy()) && e.contains("holds a run already (metrics.csv, checkpoints)"), "{e}");
+        assert!(
+            e.contains(&*dir.to_string_lossy()) && e.contains("holds a run already (metrics.csv, checkpoints)"),
+            "{e}"
+        );
         assert!(e.contains("--resume") && e.contains("--run-dir") && e.contains("--force"), "{e}");
         assert!(dir.join("metrics.csv").is_file(), "the refused run touched nothing");
         // Resuming that run in its own directory is allowed; a new run from another run's

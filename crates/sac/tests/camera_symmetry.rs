@@ -79,11 +79,16 @@ fn rendered_frames_put_blocks_where_the_camera_projects_them() {
     for seed in 0..4 {
         let obs = env.reset(seed).expect("reset");
         let scene = env.scene().expect("scene after reset");
-        let seg = env.segmentation_names().iter().position(|n| n == "block1" || n.starts_with("block1/")).expect("block1 in the segmentation") as u16;
+        let seg = env
+            .segmentation_names()
+            .iter()
+            .position(|n| n == "block1" || n.starts_with("block1/"))
+            .expect("block1 in the segmentation") as u16;
         let visual = scene.visuals.iter().find(|v| v.seg == seg).expect("block1 visual");
         let t = scene.physics.colliders[visual.collider].translation();
         // The block rests on the table, so its top face is at twice its centre's height.
-        let (u, v, _) = env.camera().project(Point3::new(t.x as f64, t.y as f64, 2.0 * t.z as f64)).expect("block in view");
+        let (u, v, _) =
+            env.camera().project(Point3::new(t.x as f64, t.y as f64, 2.0 * t.z as f64)).expect("block in view");
         let (mut n, mut sr, mut sc) = (0.0, 0.0, 0.0);
         for (i, &s) in obs.segmentation.iter().enumerate() {
             if s == seg {

@@ -47,11 +47,14 @@ fn k_updates_straight_equal_half_checkpoint_resume_half() {
     assert_eq!(straight.updates, 12);
 
     let split_dir = scratch("split");
-    let half = run(tiny(), &RunOptions { run_dir: split_dir.clone(), stop_at: Some(6), ..Default::default() }, &never).unwrap();
+    let half = run(tiny(), &RunOptions { run_dir: split_dir.clone(), stop_at: Some(6), ..Default::default() }, &never)
+        .unwrap();
     assert_eq!(half.updates, 6);
     let ck = find_checkpoint(&split_dir).unwrap();
     assert!(ck.ends_with("step_0000006"), "{}", ck.display());
-    let resumed = run(tiny(), &RunOptions { run_dir: split_dir.clone(), resume: Some(ck), ..Default::default() }, &never).unwrap();
+    let resumed =
+        run(tiny(), &RunOptions { run_dir: split_dir.clone(), resume: Some(ck), ..Default::default() }, &never)
+            .unwrap();
     assert_eq!(resumed.updates, 12);
     assert_eq!(resumed.global_step, straight.global_step);
 
@@ -65,7 +68,11 @@ fn k_updates_straight_equal_half_checkpoint_resume_half() {
     // A checkpoint of another config is refused, naming the differing field.
     let mut other = tiny();
     other.batch_size = 4;
-    let e = match run(other, &RunOptions { run_dir: scratch("other"), resume: Some(b.clone()), ..Default::default() }, &never) {
+    let e = match run(
+        other,
+        &RunOptions { run_dir: scratch("other"), resume: Some(b.clone()), ..Default::default() },
+        &never,
+    ) {
         Ok(_) => panic!("config mismatch must fail"),
         Err(e) => e.to_string(),
     };

@@ -27,11 +27,7 @@ struct Stats {
 }
 
 fn measure(task: TaskKind, steps: usize, seed0: u64) -> Stats {
-    let mut st = Stats {
-        step: Vec::new(),
-        physics: Vec::new(),
-        render: Vec::new(),
-    };
+    let mut st = Stats { step: Vec::new(), physics: Vec::new(), render: Vec::new() };
     for render in [true, false] {
         let mut cfg = EnvConfig::new(task);
         cfg.render = render;
@@ -62,39 +58,23 @@ fn measure(task: TaskKind, steps: usize, seed0: u64) -> Stats {
 
 fn peer(python: &str, mode: &str, steps: usize) -> Option<(f64, f64, f64, f64)> {
     let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../bench/pybullet_peer.py");
-    let out = Command::new(python)
-        .arg(&script)
-        .args(["--steps", &steps.to_string(), "--mode", mode])
-        .output()
-        .ok()?;
+    let out = Command::new(python).arg(&script).args(["--steps", &steps.to_string(), "--mode", mode]).output().ok()?;
     let text = String::from_utf8_lossy(&out.stdout);
     let line = text.lines().find(|l| l.starts_with('{'))?;
     let num = |key: &str| -> Option<f64> {
         let i = line.find(&format!("\"{key}\": "))? + key.len() + 4;
         line[i..].split([',', '}']).next()?.trim().parse().ok()
     };
-    Some((
-        num("median_ms")?,
-        num("p95_ms")?,
-        num("physics_median_ms")?,
-        num("render_median_ms")?,
-    ))
+    Some((num("median_ms")?, num("p95_ms")?, num("physics_median_ms")?, num("render_median_ms")?))
 }
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let get = |k: &str| {
-        args.iter()
-            .position(|a| a == k)
-            .and_then(|i| args.get(i + 1))
-            .cloned()
-    };
+    let get = |k: &str| args.iter().position(|a| a == k).and_then(|i| args.get(i + 1)).cloned();
     let steps: usize = get("--steps").and_then(|s| s.parse().ok()).unwrap_or(300);
     let rounds: usize = get("--rounds").and_then(|s| s.parse().ok()).unwrap_or(2);
     let python = get("--peer");
-    let peer_steps: usize = get("--peer-steps")
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(100);
+    let peer_steps: usize = get("--peer-steps").and_then(|s| s.parse().ok()).unwrap_or(100);
 
     let mut ours: Vec<Vec<f64>> = vec![Vec::new(); TaskKind::ALL.len()];
     let mut phys: Vec<Vec<f64>> = vec![Vec::new(); TaskKind::ALL.len()];
@@ -111,21 +91,14 @@ fn main() {
             for mode in ["floating", "fixed", "bulletarm"] {
                 match peer(py, mode, peer_steps) {
                     Some(r) => peers.push((mode.to_string(), r)),
-                    None => eprintln!(
-                        "PyBullet peer ({mode}) did not run: is pybullet installed for {py}?"
-                    ),
+                    None => eprintln!("PyBullet peer ({mode}) did not run: is pybullet installed for {py}?"),
                 }
             }
         }
     }
 
-    println!(
-        "equiarm_sim env step + 152 px RGBD render, {rounds} round(s) x {steps} steps per task, 1 thread"
-    );
-    println!(
-        "{:<16} {:>12} {:>10} {:>14} {:>12}",
-        "task", "step med ms", "p95 ms", "physics med", "render med"
-    );
+    println!("equiarm_sim env step + 152 px RGBD render, {rounds} round(s) x {steps} steps per task, 1 thread");
+    println!("{:<16} {:>12} {:>10} {:>14} {:>12}", "task", "step med ms", "p95 ms", "physics med", "render med");
     let mut all = Vec::new();
     for (k, task) in TaskKind::ALL.into_iter().enumerate() {
         all.extend_from_slice(&ours[k]);
@@ -139,12 +112,7 @@ fn main() {
         );
     }
     let our_med = pct(&mut all, 0.5);
-    println!(
-        "{:<16} {:>12.3} {:>10.3}",
-        "all tasks",
-        our_med,
-        pct(&mut all, 0.95)
-    );
+    println!("{:<16} {:>12.3} {:>10.3}", "all tasks", our_med, pct(&mut all, 0.95));
 
     // Throughput of VecEnv (one rayon task per env), block picking, expert actions, images on.
     let n_envs = get("--envs").and_then(|s| s.parse().ok()).unwrap_or(8usize);
@@ -155,12 +123,7 @@ fn main() {
     let t = Instant::now();
     for _ in 0..vec_steps {
         let actions: Vec<Action> = obs.iter().map(|o| o.expert_action).collect();
-        obs = venv
-            .step(&actions)
-            .expect("step")
-            .into_iter()
-            .map(|r| r.observation)
-            .collect();
+        obs = venv.step(&actions).expect("step").into_iter().map(|r| r.observation).collect();
     }
     let secs = t.elapsed().as_secs_f64();
     println!(
@@ -176,30 +139,12 @@ fn main() {
         println!(
             "  floating = our gripper URDF on a constraint, 24 steps at 1/240 s; fixed = Kuka + 1 IK + 100 steps;"
         );
-        println!(
-            "  bulletarm = Kuka + BulletArm's moveTo/gripper loops (IK retries, converge or 100 steps)"
-        );
+        println!("  bulletarm = Kuka + BulletArm's moveTo/gripper loops (IK retries, converge or 100 steps)");
         for mode in ["floating", "fixed", "bulletarm"] {
-            let mut med: Vec<f64> = peers
-                .iter()
-                .filter(|(m, _)| m == mode)
-                .map(|(_, r)| r.0)
-                .collect();
-            let mut p95: Vec<f64> = peers
-                .iter()
-                .filter(|(m, _)| m == mode)
-                .map(|(_, r)| r.1)
-                .collect();
-            let mut ph: Vec<f64> = peers
-                .iter()
-                .filter(|(m, _)| m == mode)
-                .map(|(_, r)| r.2)
-                .collect();
-            let mut re: Vec<f64> = peers
-                .iter()
-                .filter(|(m, _)| m == mode)
-                .map(|(_, r)| r.3)
-                .collect();
+            let mut med: Vec<f64> = peers.iter().filter(|(m, _)| m == mode).map(|(_, r)| r.0).collect();
+            let mut p95: Vec<f64> = peers.iter().filter(|(m, _)| m == mode).map(|(_, r)| r.1).collect();
+            let mut ph: Vec<f64> = peers.iter().filter(|(m, _)| m == mode).map(|(_, r)| r.2).collect();
+            let mut re: Vec<f64> = peers.iter().filter(|(m, _)| m == mode).map(|(_, r)| r.3).collect();
             if med.is_empty() {
                 continue;
             }

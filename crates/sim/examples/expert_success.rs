@@ -20,10 +20,7 @@ fn main() -> Result<(), equiarm_sim::SimError> {
         if let Some(v) = std::env::var("SUBSTEPS").ok().and_then(|v| v.parse().ok()) {
             cfg.params.substeps = v;
         }
-        if let Some(v) = std::env::var("DT_HZ")
-            .ok()
-            .and_then(|v| v.parse::<f32>().ok())
-        {
+        if let Some(v) = std::env::var("DT_HZ").ok().and_then(|v| v.parse::<f32>().ok()) {
             cfg.params.dt = 1.0 / v;
         }
         let mut env = Env::new(cfg)?;
@@ -38,13 +35,7 @@ fn main() -> Result<(), equiarm_sim::SimError> {
                 failed.push((seed, r.info.invalid));
             }
         }
-        println!(
-            "{:<16} {:>4} / {:<4}            {:.1}",
-            task.name(),
-            ok,
-            n,
-            steps as f64 / ok.max(1) as f64
-        );
+        println!("{:<16} {:>4} / {:<4}            {:.1}", task.name(), ok, n, steps as f64 / ok.max(1) as f64);
         if verbose && !failed.is_empty() {
             println!("  failed seeds (seed, invalid): {failed:?}");
         }

@@ -16,10 +16,7 @@ fn main() -> Result<(), equiarm_sim::SimError> {
     let only = args.get(2).and_then(|s| TaskKind::from_name(s));
     let seed: u64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(0);
     let steps: u32 = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(0);
-    let preset = args
-        .get(5)
-        .and_then(|s| ViewPreset::from_name(s))
-        .unwrap_or(ViewPreset::Side);
+    let preset = args.get(5).and_then(|s| ViewPreset::from_name(s)).unwrap_or(ViewPreset::Side);
     for task in TaskKind::ALL {
         if only.is_some_and(|t| t != task) {
             continue;

@@ -75,28 +75,20 @@ pub struct Asset {
 impl Asset {
     /// Index of the URDF link named `name`, or an error naming the file and link.
     pub fn link_index(&self, name: &str) -> Result<usize> {
-        self.robot
-            .links
-            .iter()
-            .position(|l| l.name == name)
-            .ok_or_else(|| SimError::UrdfInvalid {
-                file: self.file.clone(),
-                element: format!("link `{name}`"),
-                message: "the simulator needs this link but the file has none by that name".into(),
-            })
+        self.robot.links.iter().position(|l| l.name == name).ok_or_else(|| SimError::UrdfInvalid {
+            file: self.file.clone(),
+            element: format!("link `{name}`"),
+            message: "the simulator needs this link but the file has none by that name".into(),
+        })
     }
 
     /// Index of the URDF joint named `name`, or an error naming the file and joint.
     pub fn joint_index(&self, name: &str) -> Result<usize> {
-        self.robot
-            .joints
-            .iter()
-            .position(|j| j.name == name)
-            .ok_or_else(|| SimError::UrdfInvalid {
-                file: self.file.clone(),
-                element: format!("joint `{name}`"),
-                message: "the simulator needs this joint but the file has none by that name".into(),
-            })
+        self.robot.joints.iter().position(|j| j.name == name).ok_or_else(|| SimError::UrdfInvalid {
+            file: self.file.clone(),
+            element: format!("joint `{name}`"),
+            message: "the simulator needs this joint but the file has none by that name".into(),
+        })
     }
 }
 
@@ -150,10 +142,7 @@ impl Assets {
 
 /// Reads and parses one URDF file.
 pub fn load_urdf(path: &Path) -> Result<Asset> {
-    let text = std::fs::read_to_string(path).map_err(|source| SimError::Read {
-        file: path.to_path_buf(),
-        source,
-    })?;
+    let text = std::fs::read_to_string(path).map_err(|source| SimError::Read { file: path.to_path_buf(), source })?;
     parse_urdf(&path.display().to_string(), &text)
 }
 
@@ -161,22 +150,14 @@ pub fn load_urdf(path: &Path) -> Result<Asset> {
 pub fn parse_urdf(file: &str, text: &str) -> Result<Asset> {
     let robot = urdf_rs::read_from_string(text).map_err(|e| match locate_xml_error(text) {
         // The parser's message does not say where; name the element ourselves when we can.
-        Some((element, message)) => SimError::UrdfInvalid {
-            file: file.to_string(),
-            element,
-            message: format!("{message} (parser: {e})"),
-        },
-        None => SimError::UrdfParse {
-            file: file.to_string(),
-            message: e.to_string(),
-        },
+        Some((element, message)) => {
+            SimError::UrdfInvalid { file: file.to_string(), element, message: format!("{message} (parser: {e})") }
+        }
+        None => SimError::UrdfParse { file: file.to_string(), message: e.to_string() },
     })?;
     validate(file, &robot)?;
-    let materials: HashMap<&str, [f32; 3]> = robot
-        .materials
-        .iter()
-        .filter_map(|m| m.color.as_ref().map(|c| (m.name.as_str(), rgb(c.rgba.0))))
-        .collect();
+    let materials: HashMap<&str, [f32; 3]> =
+        robot.materials.iter().filter_map(|m| m.color.as_ref().map(|c| (m.name.as_str(), rgb(c.rgba.0)))).collect();
     let mut link_colors = Vec::with_capacity(robot.links.len());
     for link in &robot.links {
         let mut color = [0.6, 0.6, 0.6];
@@ -189,18 +170,13 @@ pub fn parse_urdf(file: &str, text: &str) -> Result<Asset> {
                 return Err(SimError::UrdfInvalid {
                     file: file.to_string(),
                     element: format!("link `{}` material `{}`", link.name, mat.name),
-                    message: "material has no colour and no robot-level material of that name"
-                        .into(),
+                    message: "material has no colour and no robot-level material of that name".into(),
                 });
             }
         }
         link_colors.push(color);
     }
-    Ok(Asset {
-        file: file.to_string(),
-        robot,
-        link_colors,
-    })
+    Ok(Asset { file: file.to_string(), robot, link_colors })
 }
 
 const NUMERIC_ATTRIBUTES: [&str; 22] = [
@@ -227,15 +203,7 @@ const NUMERIC_ATTRIBUTES: [&str; 22] = [
     "damping",
     "friction",
 ];
-const JOINT_TYPES: [&str; 7] = [
-    "revolute",
-    "continuous",
-    "prismatic",
-    "fixed",
-    "floating",
-    "planar",
-    "spherical",
-];
+const JOINT_TYPES: [&str; 7] = ["revolute", "continuous", "prismatic", "fixed", "floating", "planar", "spherical"];
 
 /// A light scan of URDF text for the errors urdf-rs reports without a location: a numeric attribute
 /// that is not a number, or an unknown joint type. Returns ("line N: <owner> <tag attr=...>", message).
@@ -269,10 +237,7 @@ fn locate_xml_error(text: &str) -> Option<(String, String)> {
         {
             return Some((
                 format!("line {line}: {owner} <joint type=\"{t}\">"),
-                format!(
-                    "unknown joint type `{t}` (expected one of {})",
-                    JOINT_TYPES.join(", ")
-                ),
+                format!("unknown joint type `{t}` (expected one of {})", JOINT_TYPES.join(", ")),
             ));
         }
         for (k, v) in &attrs {
@@ -313,11 +278,7 @@ fn rgb(c: [f64; 4]) -> [f32; 3] {
 }
 
 fn invalid(file: &str, element: String, message: impl Into<String>) -> SimError {
-    SimError::UrdfInvalid {
-        file: file.to_string(),
-        element,
-        message: message.into(),
-    }
+    SimError::UrdfInvalid { file: file.to_string(), element, message: message.into() }
 }
 
 fn finite(v: &[f64]) -> bool {
@@ -326,20 +287,12 @@ fn finite(v: &[f64]) -> bool {
 
 fn validate(file: &str, robot: &urdf_rs::Robot) -> Result<()> {
     if robot.links.is_empty() {
-        return Err(invalid(
-            file,
-            format!("robot `{}`", robot.name),
-            "has no links",
-        ));
+        return Err(invalid(file, format!("robot `{}`", robot.name), "has no links"));
     }
     let mut names = HashMap::new();
     for link in &robot.links {
         if names.insert(link.name.as_str(), ()).is_some() {
-            return Err(invalid(
-                file,
-                format!("link `{}`", link.name),
-                "duplicate link name",
-            ));
+            return Err(invalid(file, format!("link `{}`", link.name), "duplicate link name"));
         }
         let el = |what: &str| format!("link `{}` {what}", link.name);
         let i = &link.inertial;
@@ -351,16 +304,8 @@ fn validate(file: &str, robot: &urdf_rs::Robot) -> Result<()> {
             ));
         }
         let t = &i.inertia;
-        if !finite(&[t.ixx, t.ixy, t.ixz, t.iyy, t.iyz, t.izz])
-            || t.ixx < 0.0
-            || t.iyy < 0.0
-            || t.izz < 0.0
-        {
-            return Err(invalid(
-                file,
-                el("<inertial><inertia>"),
-                "inertia must be finite with non-negative diagonal",
-            ));
+        if !finite(&[t.ixx, t.ixy, t.ixz, t.iyy, t.iyz, t.izz]) || t.ixx < 0.0 || t.iyy < 0.0 || t.izz < 0.0 {
+            return Err(invalid(file, el("<inertial><inertia>"), "inertia must be finite with non-negative diagonal"));
         }
         if !finite(&i.origin.xyz.0) || !finite(&i.origin.rpy.0) {
             return Err(invalid(file, el("<inertial><origin>"), "non-finite origin"));
@@ -377,11 +322,7 @@ fn validate(file: &str, robot: &urdf_rs::Robot) -> Result<()> {
         let el = |what: &str| format!("joint `{}`{what}", joint.name);
         for (role, l) in [("parent", &joint.parent.link), ("child", &joint.child.link)] {
             if !names.contains_key(l.as_str()) {
-                return Err(invalid(
-                    file,
-                    el(&format!(" <{role} link=\"{l}\">")),
-                    "names a link that does not exist",
-                ));
+                return Err(invalid(file, el(&format!(" <{role} link=\"{l}\">")), "names a link that does not exist"));
             }
         }
         if !finite(&joint.origin.xyz.0) || !finite(&joint.origin.rpy.0) {
@@ -389,21 +330,14 @@ fn validate(file: &str, robot: &urdf_rs::Robot) -> Result<()> {
         }
         let a = joint.axis.xyz.0;
         if !finite(&a) || a.iter().map(|x| x * x).sum::<f64>() < 1e-12 {
-            return Err(invalid(
-                file,
-                el(" <axis>"),
-                "axis must be finite and non-zero",
-            ));
+            return Err(invalid(file, el(" <axis>"), "axis must be finite and non-zero"));
         }
         let l = &joint.limit;
         if !l.lower.is_finite() || !l.upper.is_finite() || l.lower > l.upper {
             return Err(invalid(
                 file,
                 el(" <limit>"),
-                format!(
-                    "limits [{}, {}] must be finite with lower <= upper",
-                    l.lower, l.upper
-                ),
+                format!("limits [{}, {}] must be finite with lower <= upper", l.lower, l.upper),
             ));
         }
     }
@@ -422,21 +356,11 @@ fn check_geometry(file: &str, el: String, g: &urdf_rs::Geometry) -> Result<()> {
             return Err(invalid(
                 file,
                 el,
-                format!(
-                    "mesh `{filename}` is not supported (use boxes, cylinders, spheres or capsules)"
-                ),
+                format!("mesh `{filename}` is not supported (use boxes, cylinders, spheres or capsules)"),
             ));
         }
     };
-    if ok {
-        Ok(())
-    } else {
-        Err(invalid(
-            file,
-            el,
-            "geometry sizes must be finite and positive",
-        ))
-    }
+    if ok { Ok(()) } else { Err(invalid(file, el, "geometry sizes must be finite and positive")) }
 }
 
 #[cfg(test)]
@@ -448,10 +372,7 @@ mod tests {
         let a = Assets::bundled().unwrap();
         let cube = a.get(AssetKind::Cube);
         assert_eq!(cube.link_colors.len(), 1);
-        assert!(
-            cube.link_colors[0][0] > 0.8 && cube.link_colors[0][1] < 0.2,
-            "cube is red"
-        );
+        assert!(cube.link_colors[0][0] > 0.8 && cube.link_colors[0][1] < 0.2, "cube is red");
         let g = a.get(AssetKind::Gripper);
         let palm = g.link_index("palm").unwrap();
         let finger = g.link_index("left_finger").unwrap();
@@ -466,10 +387,7 @@ mod tests {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../urdf");
         let from_disk = Assets::from_dir(&dir).unwrap();
         for kind in AssetKind::ALL {
-            assert_eq!(
-                from_disk.get(kind).robot.links.len(),
-                Assets::bundled().unwrap().get(kind).robot.links.len()
-            );
+            assert_eq!(from_disk.get(kind).robot.links.len(), Assets::bundled().unwrap().get(kind).robot.links.len());
         }
     }
 
@@ -498,35 +416,23 @@ mod tests {
         let bad = GOOD.replace(r#"type="prismatic""#, r#"type="telescopic""#);
         let msg = parse_urdf("bad_joint.urdf", &bad).unwrap_err().to_string();
         assert!(msg.contains("bad_joint.urdf"), "{msg}");
-        assert!(
-            msg.contains("joint `j`") && msg.contains("telescopic") && msg.contains("line 5"),
-            "{msg}"
-        );
+        assert!(msg.contains("joint `j`") && msg.contains("telescopic") && msg.contains("line 5"), "{msg}");
     }
 
     #[test]
     fn joint_to_unknown_link_fails_naming_joint() {
         let bad = GOOD.replace(r#"<child link="b"/>"#, r#"<child link="nowhere"/>"#);
         let msg = parse_urdf("bad_link.urdf", &bad).unwrap_err().to_string();
-        assert!(
-            msg.contains("bad_link.urdf") && msg.contains("joint `j`") && msg.contains("nowhere"),
-            "{msg}"
-        );
+        assert!(msg.contains("bad_link.urdf") && msg.contains("joint `j`") && msg.contains("nowhere"), "{msg}");
     }
 
     #[test]
     fn missing_required_joint_fails_naming_it() {
-        let msg = match parse_urdf("g.urdf", GOOD)
-            .unwrap()
-            .joint_index("left_finger_joint")
-        {
+        let msg = match parse_urdf("g.urdf", GOOD).unwrap().joint_index("left_finger_joint") {
             Err(e) => e.to_string(),
             Ok(_) => panic!("joint should be missing"),
         };
-        assert!(
-            msg.contains("g.urdf") && msg.contains("left_finger_joint"),
-            "{msg}"
-        );
+        assert!(msg.contains("g.urdf") && msg.contains("left_finger_joint"), "{msg}");
     }
 
     #[test]
@@ -534,27 +440,15 @@ mod tests {
         let bad = GOOD.replace(r#"<mass value="1"/>"#, r#"<mass value="heavy"/>"#);
         let msg = parse_urdf("bad_mass.urdf", &bad).unwrap_err().to_string();
         assert!(msg.contains("bad_mass.urdf"), "{msg}");
-        assert!(
-            msg.contains("link `a`") && msg.contains("<mass value=\"heavy\">"),
-            "{msg}"
-        );
+        assert!(msg.contains("link `a`") && msg.contains("<mass value=\"heavy\">"), "{msg}");
         let bad = GOOD.replace(r#"<axis xyz="1 0 0"/>"#, r#"<axis xyz="1 zero 0"/>"#);
         let msg = parse_urdf("bad_axis.urdf", &bad).unwrap_err().to_string();
-        assert!(
-            msg.contains("bad_axis.urdf") && msg.contains("joint `j`") && msg.contains("`zero`"),
-            "{msg}"
-        );
+        assert!(msg.contains("bad_axis.urdf") && msg.contains("joint `j`") && msg.contains("`zero`"), "{msg}");
         let bad = GOOD.replace(r#"<mass value="1"/>"#, r#"<mass value="NaN"/>"#);
         let msg = parse_urdf("nan_mass.urdf", &bad).unwrap_err().to_string();
-        assert!(
-            msg.contains("nan_mass.urdf") && msg.contains("link `a`") && msg.contains("mass"),
-            "{msg}"
-        );
+        assert!(msg.contains("nan_mass.urdf") && msg.contains("link `a`") && msg.contains("mass"), "{msg}");
         let bad = GOOD.replace(r#"size="0.1 0.1 0.1""#, r#"size="0.1 -0.1 0.1""#);
         let msg = parse_urdf("neg_box.urdf", &bad).unwrap_err().to_string();
-        assert!(
-            msg.contains("neg_box.urdf") && msg.contains("<collision> #0"),
-            "{msg}"
-        );
+        assert!(msg.contains("neg_box.urdf") && msg.contains("<collision> #0"), "{msg}");
     }
 }

@@ -58,11 +58,7 @@ impl ViewPreset {
 
     pub fn config(self) -> CameraConfig {
         let base = CameraConfig::default();
-        let angle = |deg: f64| CameraConfig {
-            elevation_deg: deg,
-            distance: 0.81,
-            ..base.clone()
-        };
+        let angle = |deg: f64| CameraConfig { elevation_deg: deg, distance: 0.81, ..base.clone() };
         match self {
             ViewPreset::Side => base,
             ViewPreset::Angle15 => angle(15.0),
@@ -142,10 +138,7 @@ impl Camera {
         let c = &config;
         let bad = |field: &'static str, message: String| Err(SimError::Config { field, message });
         if !(c.elevation_deg.is_finite() && c.elevation_deg > 0.0 && c.elevation_deg <= 90.0) {
-            return bad(
-                "elevation_deg",
-                format!("{} must be in (0, 90]", c.elevation_deg),
-            );
+            return bad("elevation_deg", format!("{} must be in (0, 90]", c.elevation_deg));
         }
         if !(c.distance.is_finite() && c.distance > 0.0) {
             return bad("distance", format!("{} must be > 0", c.distance));
@@ -154,16 +147,10 @@ impl Camera {
             return bad("fov_y_deg", format!("{} must be in (1, 170)", c.fov_y_deg));
         }
         if c.width == 0 || c.height == 0 || c.width > 8192 || c.height > 8192 {
-            return bad(
-                "width/height",
-                format!("{}x{} must be 1..=8192", c.width, c.height),
-            );
+            return bad("width/height", format!("{}x{} must be 1..=8192", c.width, c.height));
         }
         if !(c.near.is_finite() && c.far.is_finite() && c.near > 0.0 && c.far > c.near) {
-            return bad(
-                "near/far",
-                format!("need 0 < near ({}) < far ({})", c.near, c.far),
-            );
+            return bad("near/far", format!("need 0 < near ({}) < far ({})", c.near, c.far));
         }
         if !c.target.iter().all(|x| x.is_finite()) {
             return bad("target", "must be finite".into());
@@ -221,9 +208,7 @@ impl Camera {
 
     /// CameraInfo `P` (row-major 3×4, monocular: no baseline).
     pub fn camera_info_p(&self) -> [f64; 12] {
-        [
-            self.fx, 0.0, self.cx, 0.0, 0.0, self.fy, self.cy, 0.0, 0.0, 0.0, 1.0, 0.0,
-        ]
+        [self.fx, 0.0, self.cx, 0.0, 0.0, self.fy, self.cy, 0.0, 0.0, 0.0, 1.0, 0.0]
     }
 
     /// Everything a `sensor_msgs/CameraInfo` needs (no distortion: `plumb_bob` with zero D, R = I).
@@ -245,11 +230,7 @@ impl Camera {
         if c.z <= 0.0 {
             return None;
         }
-        Some((
-            self.fx * c.x / c.z + self.cx,
-            self.fy * c.y / c.z + self.cy,
-            c.z,
-        ))
+        Some((self.fx * c.x / c.z + self.cx, self.fy * c.y / c.z + self.cy, c.z))
     }
 
     /// World direction of the ray through pixel (row, col), scaled so its optical-axis component is 1
@@ -301,25 +282,9 @@ mod tests {
             assert_eq!(ViewPreset::from_name(p.name()), Some(p));
             Camera::new(p.config()).unwrap();
         }
-        let bad = CameraConfig {
-            fov_y_deg: f64::NAN,
-            ..Default::default()
-        };
-        assert!(
-            Camera::new(bad)
-                .unwrap_err()
-                .to_string()
-                .contains("fov_y_deg")
-        );
-        let bad = CameraConfig {
-            elevation_deg: 0.0,
-            ..Default::default()
-        };
-        assert!(
-            Camera::new(bad)
-                .unwrap_err()
-                .to_string()
-                .contains("elevation_deg")
-        );
+        let bad = CameraConfig { fov_y_deg: f64::NAN, ..Default::default() };
+        assert!(Camera::new(bad).unwrap_err().to_string().contains("fov_y_deg"));
+        let bad = CameraConfig { elevation_deg: 0.0, ..Default::default() };
+        assert!(Camera::new(bad).unwrap_err().to_string().contains("elevation_deg"));
     }
 }

@@ -144,18 +144,10 @@ impl Env {
     pub fn with_assets(config: EnvConfig, assets: Arc<Assets>) -> Result<Self> {
         config.params.validate()?;
         if config.max_steps == 0 {
-            return Err(SimError::Config {
-                field: "max_steps",
-                message: "must be >= 1".into(),
-            });
+            return Err(SimError::Config { field: "max_steps", message: "must be >= 1".into() });
         }
         let camera = Camera::new(config.camera.clone())?;
-        Ok(Self {
-            config,
-            camera,
-            assets,
-            episode: None,
-        })
+        Ok(Self { config, camera, assets, episode: None })
     }
 
     pub fn config(&self) -> &EnvConfig {
@@ -168,10 +160,7 @@ impl Env {
 
     /// Names of the segmentation ids of the current episode (index = id).
     pub fn segmentation_names(&self) -> &[String] {
-        self.episode
-            .as_ref()
-            .map(|e| e.scene.seg_names.as_slice())
-            .unwrap_or(&[])
+        self.episode.as_ref().map(|e| e.scene.seg_names.as_slice()).unwrap_or(&[])
     }
 
     /// The current scene (after a reset).
@@ -183,11 +172,7 @@ impl Env {
     pub fn reset(&mut self, seed: u64) -> Result<Observation> {
         let mut rng = Rng::new(seed);
         let reflect_rng = Rng::new(seed ^ 0xa076_1d64_78bd_642f);
-        let mut scene = Scene::new(
-            &self.config.params,
-            &self.assets,
-            !self.config.corruption.gripper_only,
-        )?;
+        let mut scene = Scene::new(&self.config.params, &self.assets, !self.config.corruption.gripper_only)?;
         let tcp = Vector::new(RESET_TCP[0], RESET_TCP[1], RESET_TCP[2]);
         let gripper = Gripper::insert(&mut scene, &self.assets, tcp, 0.0, 1.0)?;
         let task = TaskState::spawn(self.config.task, &mut scene, &self.assets, &mut rng)?;
@@ -212,9 +197,7 @@ impl Env {
     /// workspace). A non-finite component is rejected with an error and nothing moves.
     pub fn step(&mut self, action: &Action) -> Result<StepResult> {
         if !action.is_finite() {
-            return Err(SimError::Action(format!(
-                "non-finite component in {action:?}"
-            )));
+            return Err(SimError::Action(format!("non-finite component in {action:?}")));
         }
         let ep = self.episode.as_mut().ok_or(SimError::NotReset)?;
         ep.gripper.apply(&mut ep.scene, *action);
@@ -230,11 +213,7 @@ impl Env {
             observation,
             reward: if success { 1.0 } else { 0.0 },
             done,
-            info: StepInfo {
-                success,
-                invalid,
-                timeout,
-            },
+            info: StepInfo { success, invalid, timeout },
         })
     }
 
@@ -259,28 +238,17 @@ impl Env {
     /// Renders the current scene without corruptions (colour, depth, segmentation).
     pub fn render(&self) -> Option<Frame> {
         let ep = self.episode.as_ref()?;
-        let mut frame = Frame::new(
-            self.camera.width(),
-            self.camera.height(),
-            self.camera.config.far as f32,
-        );
+        let mut frame = Frame::new(self.camera.width(), self.camera.height(), self.camera.config.far as f32);
         rasterize(&ep.scene, &ep.meshes, &self.camera, &mut frame);
         Some(frame)
     }
 
     fn observe(&mut self) -> Observation {
-        let frame = if self.config.render {
-            self.render()
-        } else {
-            None
-        };
+        let frame = if self.config.render { self.render() } else { None };
         let corruption = self.config.corruption.clone();
         let (w, h) = (self.camera.width(), self.camera.height());
         let camera = self.camera.clone();
-        let ep = self
-            .episode
-            .as_mut()
-            .expect("observe is called with an episode");
+        let ep = self.episode.as_mut().expect("observe is called with an episode");
         let held = ep.gripper.held_bodies(&ep.scene);
         ep.expert = ep.task.expert_action(&ep.scene, &ep.gripper, &held);
         let (mut color, mut depth, mut segmentation) = match frame {
@@ -335,9 +303,7 @@ impl VecEnv {
     /// `n` envs with one config, sharing one copy of the assets.
     pub fn new(config: EnvConfig, n: usize) -> Result<Self> {
         let assets = Arc::new(Assets::bundled()?);
-        let envs = (0..n)
-            .map(|_| Env::with_assets(config.clone(), assets.clone()))
-            .collect::<Result<_>>()?;
+        let envs = (0..n).map(|_| Env::with_assets(config.clone(), assets.clone())).collect::<Result<_>>()?;
         Ok(Self { envs })
     }
 
@@ -349,11 +315,7 @@ impl VecEnv {
                 message: format!("{} seeds for {} envs", seeds.len(), self.envs.len()),
             });
         }
-        self.envs
-            .par_iter_mut()
-            .zip(seeds.par_iter())
-            .map(|(e, s)| e.reset(*s))
-            .collect()
+        self.envs.par_iter_mut().zip(seeds.par_iter()).map(|(e, s)| e.reset(*s)).collect()
     }
 
     /// Steps env k with `actions[k]`.
@@ -364,10 +326,6 @@ impl VecEnv {
                 message: format!("{} actions for {} envs", actions.len(), self.envs.len()),
             });
         }
-        self.envs
-            .par_iter_mut()
-            .zip(actions.par_iter())
-            .map(|(e, a)| e.step(a))
-            .collect()
+        self.envs.par_iter_mut().zip(actions.par_iter()).map(|(e, a)| e.step(a)).collect()
     }
 }

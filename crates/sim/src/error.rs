@@ -19,17 +19,10 @@ pub enum SimError {
     UrdfParse { file: String, message: String },
     /// The URDF parsed, but one element is not usable by the simulator.
     #[error("URDF {file}: {element}: {message}")]
-    UrdfInvalid {
-        file: String,
-        element: String,
-        message: String,
-    },
+    UrdfInvalid { file: String, element: String, message: String },
     /// A configuration value is out of its domain.
     #[error("invalid config value `{field}`: {message}")]
-    Config {
-        field: &'static str,
-        message: String,
-    },
+    Config { field: &'static str, message: String },
     /// An action had a non-finite component.
     #[error("invalid action: {0}")]
     Action(String),

@@ -42,13 +42,7 @@ pub struct Action {
 
 impl Action {
     pub fn new(open_ratio: f32, dx: f32, dy: f32, dz: f32, dtheta: f32) -> Self {
-        Self {
-            open_ratio,
-            dx,
-            dy,
-            dz,
-            dtheta,
-        }
+        Self { open_ratio, dx, dy, dz, dtheta }
     }
 
     /// Components in the order (p, dx, dy, dz, dθ).
@@ -75,25 +69,13 @@ impl Action {
     /// after clipping (PAPER_SPEC §1.2).
     pub fn to_normalized(self) -> [f32; 5] {
         let a = self.clipped();
-        [
-            a.open_ratio * 2.0 - 1.0,
-            a.dx / MAX_DPOS,
-            a.dy / MAX_DPOS,
-            a.dz / MAX_DPOS,
-            a.dtheta / MAX_DROT,
-        ]
+        [a.open_ratio * 2.0 - 1.0, a.dx / MAX_DPOS, a.dy / MAX_DPOS, a.dz / MAX_DPOS, a.dtheta / MAX_DROT]
     }
 
     /// Decodes a normalised action (values outside [-1, 1] are clipped).
     pub fn from_normalized(u: [f32; 5]) -> Self {
         let u = u.map(|x| x.clamp(-1.0, 1.0));
-        Self::new(
-            (u[0] + 1.0) / 2.0,
-            u[1] * MAX_DPOS,
-            u[2] * MAX_DPOS,
-            u[3] * MAX_DPOS,
-            u[4] * MAX_DROT,
-        )
+        Self::new((u[0] + 1.0) / 2.0, u[1] * MAX_DPOS, u[2] * MAX_DPOS, u[3] * MAX_DPOS, u[4] * MAX_DROT)
     }
 }
 
@@ -117,21 +99,12 @@ pub struct Gripper {
 }
 
 fn palm_pose(tcp: Vector, yaw: f32) -> Pose {
-    Pose::from_parts(
-        tcp + Vector::new(0.0, 0.0, TCP_BELOW_PALM),
-        Rotation::from_rotation_z(yaw),
-    )
+    Pose::from_parts(tcp + Vector::new(0.0, 0.0, TCP_BELOW_PALM), Rotation::from_rotation_z(yaw))
 }
 
 impl Gripper {
     /// Inserts the gripper with its TCP at `tcp`, yaw `yaw`, fingers commanded to `open_ratio`.
-    pub fn insert(
-        scene: &mut Scene,
-        assets: &Assets,
-        tcp: Vector,
-        yaw: f32,
-        open_ratio: f32,
-    ) -> Result<Self> {
+    pub fn insert(scene: &mut Scene, assets: &Assets, tcp: Vector, yaw: f32, open_ratio: f32) -> Result<Self> {
         let asset = assets.get(AssetKind::Gripper);
         let palm_i = asset.link_index("palm")?;
         let li = asset.link_index("left_finger")?;
@@ -145,33 +118,27 @@ impl Gripper {
             scene.insert(asset, "gripper", palm_pose(tcp, yaw), false, friction)?;
         // Inserted links keep the URDF order (no link of the gripper is an empty frame to squeeze).
         let link_of = |urdf_index: usize| -> Result<&rapier3d_urdf::UrdfLinkHandle> {
-            h.links
-                .get(urdf_index)
-                .ok_or_else(|| crate::error::SimError::UrdfInvalid {
-                    file: asset.file.clone(),
-                    element: format!("link `{}`", asset.robot.links[urdf_index].name),
-                    message: "was not turned into a rigid body".into(),
-                })
+            h.links.get(urdf_index).ok_or_else(|| crate::error::SimError::UrdfInvalid {
+                file: asset.file.clone(),
+                element: format!("link `{}`", asset.robot.links[urdf_index].name),
+                message: "was not turned into a rigid body".into(),
+            })
         };
         let palm = link_of(palm_i)?.body;
         let left = link_of(li)?;
         let right = link_of(ri)?;
         let joint_of = |urdf_index: usize| {
-            h.joints.get(urdf_index).map(|j| j.joint).ok_or_else(|| {
-                crate::error::SimError::UrdfInvalid {
-                    file: asset.file.clone(),
-                    element: format!("joint `{}`", asset.robot.joints[urdf_index].name),
-                    message: "was not turned into a rapier joint".into(),
-                }
+            h.joints.get(urdf_index).map(|j| j.joint).ok_or_else(|| crate::error::SimError::UrdfInvalid {
+                file: asset.file.clone(),
+                element: format!("joint `{}`", asset.robot.joints[urdf_index].name),
+                message: "was not turned into a rapier joint".into(),
             })
         };
         let first_collider = |l: &rapier3d_urdf::UrdfLinkHandle, i: usize| {
-            l.colliders.first().map(|c| c.handle).ok_or_else(|| {
-                crate::error::SimError::UrdfInvalid {
-                    file: asset.file.clone(),
-                    element: format!("link `{}`", asset.robot.links[i].name),
-                    message: "a finger needs a <collision> shape".into(),
-                }
+            l.colliders.first().map(|c| c.handle).ok_or_else(|| crate::error::SimError::UrdfInvalid {
+                file: asset.file.clone(),
+                element: format!("link `{}`", asset.robot.links[i].name),
+                message: "a finger needs a <collision> shape".into(),
             })
         };
         let finger_colliders = [first_collider(left, li)?, first_collider(right, ri)?];
@@ -190,12 +157,8 @@ impl Gripper {
         let p = scene.params.clone();
         for j in g.finger_joints {
             if let Some(joint) = scene.physics.impulse_joints.get_mut(j, true) {
-                joint
-                    .data
-                    .set_motor_model(JointAxis::LinX, MotorModel::ForceBased);
-                joint
-                    .data
-                    .set_motor_max_force(JointAxis::LinX, p.grip_max_force);
+                joint.data.set_motor_model(JointAxis::LinX, MotorModel::ForceBased);
+                joint.data.set_motor_max_force(JointAxis::LinX, p.grip_max_force);
             }
         }
         g.command_fingers(scene, open_ratio);
@@ -252,11 +215,7 @@ impl Gripper {
         // jaw command changes, so a grasp closes where the arm arrived, not on the way down).
         let changed = (a.open_ratio - self.open_target).abs() > 1e-4;
         self.command_fingers(scene, a.open_ratio);
-        let grip_steps = if changed {
-            scene.params.grip_substeps
-        } else {
-            0
-        };
+        let grip_steps = if changed { scene.params.grip_substeps } else { 0 };
         for _ in 0..scene.params.settle_substeps + grip_steps {
             scene.physics.bodies[self.palm].set_next_kinematic_position(palm_pose(target, yaw1));
             scene.step();
@@ -332,18 +291,12 @@ impl Gripper {
                 if !pair.has_any_active_contact() {
                     continue;
                 }
-                let horizontal = pair
-                    .manifolds()
-                    .iter()
-                    .any(|m| !m.data.solver_contacts.is_empty() && m.data.normal.z.abs() < 0.3);
+                let horizontal =
+                    pair.manifolds().iter().any(|m| !m.data.solver_contacts.is_empty() && m.data.normal.z.abs() < 0.3);
                 if !horizontal {
                     continue;
                 }
-                let other = if pair.collider1 == finger {
-                    pair.collider2
-                } else {
-                    pair.collider1
-                };
+                let other = if pair.collider1 == finger { pair.collider2 } else { pair.collider1 };
                 if let Some(b) = scene.physics.colliders.get(other).and_then(|c| c.parent())
                     && !self.fingers.contains(&b)
                     && b != self.palm

@@ -39,13 +39,7 @@ pub struct Frame {
 impl Frame {
     pub fn new(width: usize, height: usize, far: f32) -> Self {
         let n = width * height;
-        Self {
-            width,
-            height,
-            color: vec![0; n * 3],
-            depth: vec![far; n],
-            segmentation: vec![0; n],
-        }
+        Self { width, height, color: vec![0; n * 3], depth: vec![far; n], segmentation: vec![0; n] }
     }
 }
 
@@ -60,10 +54,8 @@ impl Frame {
         for r in 0..size {
             let src = (row0 + r) * self.width + col0;
             out.depth[r * size..(r + 1) * size].copy_from_slice(&self.depth[src..src + size]);
-            out.segmentation[r * size..(r + 1) * size]
-                .copy_from_slice(&self.segmentation[src..src + size]);
-            out.color[r * size * 3..(r + 1) * size * 3]
-                .copy_from_slice(&self.color[src * 3..(src + size) * 3]);
+            out.segmentation[r * size..(r + 1) * size].copy_from_slice(&self.segmentation[src..src + size]);
+            out.color[r * size * 3..(r + 1) * size * 3].copy_from_slice(&self.color[src * 3..(src + size) * 3]);
         }
         Some(out)
     }
@@ -217,11 +209,7 @@ impl Cam32 {
 /// Rasterises the scene into `frame` (which must have the camera's size).
 pub fn rasterize(scene: &Scene, meshes: &MeshCache, cam: &Camera, frame: &mut Frame) {
     let c = Cam32::new(cam);
-    assert_eq!(
-        (frame.width, frame.height),
-        (c.w, c.h),
-        "frame size must match the camera"
-    );
+    assert_eq!((frame.width, frame.height), (c.w, c.h), "frame size must match the camera");
     for (i, px) in frame.color.chunks_exact_mut(3).enumerate() {
         px.copy_from_slice(&BACKGROUND);
         frame.depth[i] = c.far;
@@ -237,11 +225,7 @@ pub fn rasterize(scene: &Scene, meshes: &MeshCache, cam: &Camera, frame: &mut Fr
         world.extend(item.vertices.iter().map(|v| pose * *v));
         let centre = pose.translation;
         for t in &item.triangles {
-            let w = [
-                world[t[0] as usize],
-                world[t[1] as usize],
-                world[t[2] as usize],
-            ];
+            let w = [world[t[0] as usize], world[t[1] as usize], world[t[2] as usize]];
             if item.convex_centred {
                 // Back-face culling: the outward normal points away from the centre.
                 let mut n = (w[1] - w[0]).cross(w[2] - w[0]);
@@ -301,60 +285,22 @@ fn draw_triangle(c: &Cam32, item: &MeshItem, w: [Vector; 3], frame: &mut Frame) 
     let proj = |p: Vector| [c.fx * p.x / p.z + c.cx, c.fy * p.y / p.z + c.cy];
     let pts: Vec<[f32; 2]> = poly[..np].iter().map(|p| proj(*p)).collect();
     for k in 1..np - 1 {
-        raster_2d(
-            c,
-            item.seg,
-            paint,
-            n_c,
-            d,
-            [pts[0], pts[k], pts[k + 1]],
-            frame,
-        );
+        raster_2d(c, item.seg, paint, n_c, d, [pts[0], pts[k], pts[k + 1]], frame);
     }
 }
 
 #[allow(clippy::too_many_arguments)]
-fn raster_2d(
-    c: &Cam32,
-    seg: u16,
-    paint: Paint,
-    n_c: Vector,
-    d: f32,
-    p: [[f32; 2]; 3],
-    frame: &mut Frame,
-) {
-    let edge = |a: [f32; 2], b: [f32; 2], q: [f32; 2]| {
-        (b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0])
-    };
+fn raster_2d(c: &Cam32, seg: u16, paint: Paint, n_c: Vector, d: f32, p: [[f32; 2]; 3], frame: &mut Frame) {
+    let edge = |a: [f32; 2], b: [f32; 2], q: [f32; 2]| (b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0]);
     let area = edge(p[0], p[1], p[2]);
     if area.abs() < 1e-12 {
         return;
     }
     let sign = area.signum();
-    let minx = p
-        .iter()
-        .map(|q| q[0])
-        .fold(f32::INFINITY, f32::min)
-        .ceil()
-        .max(0.0);
-    let maxx = p
-        .iter()
-        .map(|q| q[0])
-        .fold(f32::NEG_INFINITY, f32::max)
-        .floor()
-        .min(c.w as f32 - 1.0);
-    let miny = p
-        .iter()
-        .map(|q| q[1])
-        .fold(f32::INFINITY, f32::min)
-        .ceil()
-        .max(0.0);
-    let maxy = p
-        .iter()
-        .map(|q| q[1])
-        .fold(f32::NEG_INFINITY, f32::max)
-        .floor()
-        .min(c.h as f32 - 1.0);
+    let minx = p.iter().map(|q| q[0]).fold(f32::INFINITY, f32::min).ceil().max(0.0);
+    let maxx = p.iter().map(|q| q[0]).fold(f32::NEG_INFINITY, f32::max).floor().min(c.w as f32 - 1.0);
+    let miny = p.iter().map(|q| q[1]).fold(f32::INFINITY, f32::min).ceil().max(0.0);
+    let maxy = p.iter().map(|q| q[1]).fold(f32::NEG_INFINITY, f32::max).floor().min(c.h as f32 - 1.0);
     if minx > maxx || miny > maxy {
         return;
     }
@@ -401,11 +347,8 @@ fn raster_2d(
 pub fn raycast(scene: &Scene, cam: &Camera) -> Frame {
     let c = Cam32::new(cam);
     let mut frame = Frame::new(c.w, c.h, c.far);
-    let info: HashMap<ColliderHandle, (u16, [f32; 3], bool)> = scene
-        .visuals
-        .iter()
-        .map(|v| (v.collider, (v.seg, v.color, v.checker)))
-        .collect();
+    let info: HashMap<ColliderHandle, (u16, [f32; 3], bool)> =
+        scene.visuals.iter().map(|v| (v.collider, (v.seg, v.color, v.checker))).collect();
     let qp = scene.physics.query_pipeline();
     for row in 0..c.h {
         for col in 0..c.w {
@@ -428,11 +371,7 @@ pub fn raycast(scene: &Scene, cam: &Camera) -> Frame {
                 if n.dot(dir) > 0.0 {
                     n = -n;
                 }
-                let color = if checker {
-                    checker_color(color, c.eye + dir * z)
-                } else {
-                    color
-                };
+                let color = if checker { checker_color(color, c.eye + dir * z) } else { color };
                 frame.color[i * 3..i * 3 + 3].copy_from_slice(&shade(color, n));
             }
         }

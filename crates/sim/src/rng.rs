@@ -10,9 +10,7 @@ pub struct Rng {
 
 impl Rng {
     pub fn new(seed: u64) -> Self {
-        Self {
-            state: seed ^ 0x5851_f42d_4c95_7f2d,
-        }
+        Self { state: seed ^ 0x5851_f42d_4c95_7f2d }
     }
 
     pub fn next_u64(&mut self) -> u64 {

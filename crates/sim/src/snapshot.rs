@@ -16,10 +16,8 @@ pub struct SnapshotFiles {
 }
 
 fn save(path: &Path, bytes: &[u8], w: usize, h: usize, ty: image::ExtendedColorType) -> Result<()> {
-    image::save_buffer(path, bytes, w as u32, h as u32, ty).map_err(|e| SimError::Image {
-        file: path.to_path_buf(),
-        message: e.to_string(),
-    })
+    image::save_buffer(path, bytes, w as u32, h as u32, ty)
+        .map_err(|e| SimError::Image { file: path.to_path_buf(), message: e.to_string() })
 }
 
 /// False colour of a segmentation id (0 = black).
@@ -28,62 +26,34 @@ pub fn seg_color(id: u16) -> [u8; 3] {
         return [0, 0, 0];
     }
     let x = (id as u32).wrapping_mul(2_654_435_761);
-    [
-        (x >> 24) as u8 | 0x30,
-        (x >> 16) as u8 | 0x30,
-        (x >> 8) as u8 | 0x30,
-    ]
+    [(x >> 24) as u8 | 0x30, (x >> 16) as u8 | 0x30, (x >> 8) as u8 | 0x30]
 }
 
 /// Writes `<prefix>_color.png`, `<prefix>_depth.png` (16-bit, mm) and `<prefix>_seg.png` into `dir`.
 pub fn write_pngs(frame: &Frame, dir: &Path, prefix: &str) -> Result<SnapshotFiles> {
-    std::fs::create_dir_all(dir).map_err(|e| SimError::Image {
-        file: dir.to_path_buf(),
-        message: e.to_string(),
-    })?;
+    std::fs::create_dir_all(dir).map_err(|e| SimError::Image { file: dir.to_path_buf(), message: e.to_string() })?;
     let files = SnapshotFiles {
         color: dir.join(format!("{prefix}_color.png")),
         depth: dir.join(format!("{prefix}_depth.png")),
         segmentation: dir.join(format!("{prefix}_seg.png")),
     };
     let (w, h) = (frame.width, frame.height);
-    save(
-        &files.color,
-        &frame.color,
-        w,
-        h,
-        image::ExtendedColorType::Rgb8,
-    )?;
+    save(&files.color, &frame.color, w, h, image::ExtendedColorType::Rgb8)?;
     let mut d16 = Vec::with_capacity(w * h * 2);
     for &z in &frame.depth {
         let mm = (z * 1000.0).round().clamp(0.0, 65535.0) as u16;
         d16.extend_from_slice(&mm.to_ne_bytes());
     }
     save(&files.depth, &d16, w, h, image::ExtendedColorType::L16)?;
-    let seg: Vec<u8> = frame
-        .segmentation
-        .iter()
-        .flat_map(|&s| seg_color(s))
-        .collect();
-    save(
-        &files.segmentation,
-        &seg,
-        w,
-        h,
-        image::ExtendedColorType::Rgb8,
-    )?;
+    let seg: Vec<u8> = frame.segmentation.iter().flat_map(|&s| seg_color(s)).collect();
+    save(&files.segmentation, &seg, w, h, image::ExtendedColorType::Rgb8)?;
     Ok(files)
 }
 
 /// Resets an env with `config` and `seed`, takes `expert_steps` expert steps (stopping early when the
 /// episode ends), and writes the uncorrupted colour, depth and segmentation PNGs of the scene into
 /// `dir` as `<task>_color.png`, `<task>_depth.png`, `<task>_seg.png`. For `equiarm sim snapshot`.
-pub fn snapshot_task(
-    config: EnvConfig,
-    seed: u64,
-    expert_steps: u32,
-    dir: &Path,
-) -> Result<SnapshotFiles> {
+pub fn snapshot_task(config: EnvConfig, seed: u64, expert_steps: u32, dir: &Path) -> Result<SnapshotFiles> {
     let task = config.task;
     let mut env = Env::new(config)?;
     let mut obs = env.reset(seed)?;
@@ -105,8 +75,7 @@ mod tests {
 
     #[test]
     fn snapshot_writes_three_readable_pngs() {
-        let dir =
-            std::env::temp_dir().join(format!("equiarm_sim_snapshot_test_{}", std::process::id()));
+        let dir = std::env::temp_dir().join(format!("equiarm_sim_snapshot_test_{}", std::process::id()));
         let files = snapshot_task(EnvConfig::new(TaskKind::BlockPushing), 1, 0, &dir).unwrap();
         let color = image::open(&files.color).unwrap();
         assert_eq!((color.width(), color.height()), (152, 152));

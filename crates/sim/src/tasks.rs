@@ -90,10 +90,7 @@ fn sample_xy(rng: &mut Rng, padding: f32, min_dist: f32, others: &[[f32; 2]]) ->
     let mut p = [0.0; 2];
     for _ in 0..100 {
         p = [rng.uniform(lo_x, hi_x), rng.uniform(lo_y, hi_y)];
-        if others
-            .iter()
-            .all(|o| ((o[0] - p[0]).powi(2) + (o[1] - p[1]).powi(2)).sqrt() > min_dist)
-        {
+        if others.iter().all(|o| ((o[0] - p[0]).powi(2) + (o[1] - p[1]).powi(2)).sqrt() > min_dist) {
             break;
         }
     }
@@ -106,12 +103,7 @@ fn pose_xy(p: [f32; 2], z: f32, yaw: f32) -> Pose {
 
 impl TaskState {
     /// Populates `scene` with the task's objects (the gripper is already in it).
-    pub fn spawn(
-        kind: TaskKind,
-        scene: &mut Scene,
-        assets: &Assets,
-        rng: &mut Rng,
-    ) -> Result<Self> {
+    pub fn spawn(kind: TaskKind, scene: &mut Scene, assets: &Assets, rng: &mut Rng) -> Result<Self> {
         let fr = scene.params.object_friction;
         let mut bodies = Vec::new();
         let mut goal = None;
@@ -139,13 +131,8 @@ impl TaskState {
                 } else {
                     rng.uniform(-FRAC_PI_2, FRAC_PI_2)
                 };
-                let h = scene.insert(
-                    assets.get(AssetKind::Cube),
-                    "cube",
-                    pose_xy(p, CUBE_HALF + 1e-3, yaw),
-                    false,
-                    fr,
-                )?;
+                let h =
+                    scene.insert(assets.get(AssetKind::Cube), "cube", pose_xy(p, CUBE_HALF + 1e-3, yaw), false, fr)?;
                 bodies.push(h.links[0].body);
                 if kind == TaskKind::BlockPushing {
                     let g = sample_xy(rng, 0.13, 0.09, &[p]);
@@ -174,23 +161,13 @@ impl TaskState {
                 };
                 for name in ["cabinet", "drawer", "handle"] {
                     let i = asset.link_index(name)?;
-                    bodies.push(
-                        h.links
-                            .get(i)
-                            .ok_or_else(|| missing(format!("link `{name}`")))?
-                            .body,
-                    );
+                    bodies.push(h.links.get(i).ok_or_else(|| missing(format!("link `{name}`")))?.body);
                 }
                 let j = asset.joint_index("drawer_joint")?;
-                let joint = h
-                    .joints
-                    .get(j)
-                    .ok_or_else(|| missing("joint `drawer_joint`".into()))?
-                    .joint;
+                let joint = h.joints.get(j).ok_or_else(|| missing("joint `drawer_joint`".into()))?.joint;
                 let resist = scene.params.drawer_resistance;
                 if let Some(jt) = scene.physics.impulse_joints.get_mut(joint, true) {
-                    jt.data
-                        .set_motor_model(JointAxis::LinX, MotorModel::ForceBased);
+                    jt.data.set_motor_model(JointAxis::LinX, MotorModel::ForceBased);
                     jt.data.set_motor_velocity(JointAxis::LinX, 0.0, 1000.0);
                     jt.data.set_motor_max_force(JointAxis::LinX, resist);
                 }
@@ -200,31 +177,14 @@ impl TaskState {
                 let yc = rng.uniform(-FRAC_PI_2, FRAC_PI_2);
                 let pb = sample_xy(rng, 0.17, 0.17, &[pc]);
                 let yb = rng.uniform(-FRAC_PI_2, FRAC_PI_2);
-                let h = scene.insert(
-                    assets.get(AssetKind::Cube),
-                    "cube",
-                    pose_xy(pc, CUBE_HALF + 1e-3, yc),
-                    false,
-                    fr,
-                )?;
+                let h =
+                    scene.insert(assets.get(AssetKind::Cube), "cube", pose_xy(pc, CUBE_HALF + 1e-3, yc), false, fr)?;
                 bodies.push(h.links[0].body);
-                let h = scene.insert(
-                    assets.get(AssetKind::Bowl),
-                    "bowl",
-                    pose_xy(pb, 1e-3, yb),
-                    false,
-                    fr,
-                )?;
+                let h = scene.insert(assets.get(AssetKind::Bowl), "bowl", pose_xy(pb, 1e-3, yb), false, fr)?;
                 bodies.push(h.links[0].body);
             }
         }
-        Ok(Self {
-            kind,
-            bodies,
-            goal,
-            stage: 0,
-            locked_yaw: None,
-        })
+        Ok(Self { kind, bodies, goal, stage: 0, locked_yaw: None })
     }
 
     fn xy(scene: &Scene, b: RigidBodyHandle) -> [f32; 2] {
@@ -247,8 +207,7 @@ impl TaskState {
         for &x in ca {
             for &y in cb {
                 let (cx, cy) = (&scene.physics.colliders[x], &scene.physics.colliders[y]);
-                if let Ok(d) =
-                    parry::query::distance(cx.position(), cx.shape(), cy.position(), cy.shape())
+                if let Ok(d) = parry::query::distance(cx.position(), cx.shape(), cy.position(), cy.shape())
                     && d.distance <= tol
                 {
                     return true;
@@ -299,12 +258,7 @@ impl TaskState {
     }
 
     /// The expert action for the current state; advances the waypoint index when a waypoint is reached.
-    pub fn expert_action(
-        &mut self,
-        scene: &Scene,
-        gripper: &Gripper,
-        held: &[RigidBodyHandle],
-    ) -> Action {
+    pub fn expert_action(&mut self, scene: &Scene, gripper: &Gripper, held: &[RigidBodyHandle]) -> Action {
         match self.kind {
             TaskKind::BlockPicking => {
                 let cube = self.bodies[0];
@@ -314,10 +268,7 @@ impl TaskState {
                 let p = scene.physics.bodies[cube].position();
                 let yaw = nearest_equivalent(yaw_of(p.rotation), gripper.yaw, FRAC_PI_2);
                 let (a, reached) = toward(gripper, p.translation, yaw);
-                Action {
-                    open_ratio: if reached { 0.0 } else { 1.0 },
-                    ..a
-                }
+                Action { open_ratio: if reached { 0.0 } else { 1.0 }, ..a }
             }
             TaskKind::BlockPulling => {
                 let b1 = Self::xy(scene, self.bodies[0]);
@@ -329,11 +280,7 @@ impl TaskState {
                 let g = [b1[0] + 0.08 * ux, b1[1] + 0.08 * uy];
                 let yaw = nearest_equivalent(uy.atan2(ux) + FRAC_PI_2, gripper.yaw, PI);
                 let wps = [(g, 0.10), (g, 0.03), (b2, 0.03)];
-                self.follow(
-                    gripper,
-                    &wps.map(|(p, z)| (Vector::new(p[0], p[1], z), 1.0, 1.0)),
-                    yaw,
-                )
+                self.follow(gripper, &wps.map(|(p, z)| (Vector::new(p[0], p[1], z), 1.0, 1.0)), yaw)
             }
             TaskKind::BlockPushing => {
                 let c = Self::xy(scene, self.bodies[0]);
@@ -346,11 +293,7 @@ impl TaskState {
                 let gg = [g[0] - 0.035 * rx, g[1] - 0.035 * ry];
                 let yaw = nearest_equivalent(ry.atan2(rx) + FRAC_PI_2, gripper.yaw, PI);
                 let wps = [(p0, 0.11), (p0, 0.03), (gg, 0.03)];
-                self.follow(
-                    gripper,
-                    &wps.map(|(p, z)| (Vector::new(p[0], p[1], z), 0.5, 0.5)),
-                    yaw,
-                )
+                self.follow(gripper, &wps.map(|(p, z)| (Vector::new(p[0], p[1], z), 0.5, 0.5)), yaw)
             }
             TaskKind::DrawerOpening => {
                 let cab = scene.physics.bodies[self.bodies[0]].position();
@@ -358,11 +301,7 @@ impl TaskState {
                 let handle = scene.physics.bodies[self.bodies[2]].translation();
                 let h = handle + xd * 0.02 - Vector::Z * 0.02;
                 let yaw = nearest_equivalent(yaw_of(cab.rotation) + FRAC_PI_2, gripper.yaw, PI);
-                let wps = [
-                    (h + Vector::Z * 0.1, 0.0, 0.0),
-                    (h, 0.0, 0.0),
-                    (h - xd * 0.2, 0.0, 0.0),
-                ];
+                let wps = [(h + Vector::Z * 0.1, 0.0, 0.0), (h, 0.0, 0.0), (h - xd * 0.2, 0.0, 0.0)];
                 self.follow(gripper, &wps, yaw)
             }
             TaskKind::BlockInBowl => {
@@ -393,8 +332,7 @@ impl TaskState {
     fn follow(&mut self, gripper: &Gripper, wps: &[(Vector, f32, f32)], yaw: f32) -> Action {
         let stage = self.stage % wps.len();
         let (pos, p_move, p_arrive) = wps[stage];
-        let sweeping = matches!(self.kind, TaskKind::BlockPulling | TaskKind::BlockPushing)
-            && stage + 1 == wps.len();
+        let sweeping = matches!(self.kind, TaskKind::BlockPulling | TaskKind::BlockPushing) && stage + 1 == wps.len();
         let yaw = match (sweeping, self.locked_yaw) {
             (true, Some(y)) => y,
             (true, None) => {
@@ -409,15 +347,9 @@ impl TaskState {
         let (a, reached) = toward(gripper, clip_to_workspace(pos), yaw);
         if reached {
             self.stage = (stage + 1) % wps.len();
-            Action {
-                open_ratio: p_arrive,
-                ..a
-            }
+            Action { open_ratio: p_arrive, ..a }
         } else {
-            Action {
-                open_ratio: p_move,
-                ..a
-            }
+            Action { open_ratio: p_move, ..a }
         }
     }
 }
@@ -434,10 +366,7 @@ fn clip_to_workspace(p: Vector) -> Vector {
 fn toward(gripper: &Gripper, goal: Vector, goal_yaw: f32) -> (Action, bool) {
     let d = goal - gripper.tcp;
     let dth = goal_yaw - gripper.yaw;
-    let reached = d.x.abs() < MAX_DPOS
-        && d.y.abs() < MAX_DPOS
-        && d.z.abs() < MAX_DPOS
-        && dth.abs() < MAX_DROT;
+    let reached = d.x.abs() < MAX_DPOS && d.y.abs() < MAX_DPOS && d.z.abs() < MAX_DPOS && dth.abs() < MAX_DROT;
     let a = Action::new(
         0.0,
         d.x.clamp(-MAX_DPOS, MAX_DPOS),

@@ -85,10 +85,7 @@ impl SimParams {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(SimError::Config {
-                    field,
-                    message: format!("{v} must be finite and > 0"),
-                })
+                Err(SimError::Config { field, message: format!("{v} must be finite and > 0") })
             }
         };
         pos("dt", self.dt)?;
@@ -106,23 +103,14 @@ impl SimParams {
             ("drawer_resistance", self.drawer_resistance),
         ] {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(SimError::Config {
-                    field: f,
-                    message: format!("{v} must be finite and >= 0"),
-                });
+                return Err(SimError::Config { field: f, message: format!("{v} must be finite and >= 0") });
             }
         }
         if self.substeps == 0 {
-            return Err(SimError::Config {
-                field: "substeps",
-                message: "must be >= 1".into(),
-            });
+            return Err(SimError::Config { field: "substeps", message: "must be >= 1".into() });
         }
         if self.solver_iterations == 0 {
-            return Err(SimError::Config {
-                field: "solver_iterations",
-                message: "must be >= 1".into(),
-            });
+            return Err(SimError::Config { field: "solver_iterations", message: "must be >= 1".into() });
         }
         Ok(())
     }
@@ -156,23 +144,15 @@ impl Scene {
     pub fn new(params: &SimParams, assets: &Assets, checker_floor: bool) -> Result<Self> {
         params.validate()?;
         // NOTE: rapier's default world is Y-up; URDF and the paper are Z-up.
-        let mut physics = PhysicsWorld {
-            gravity: Vector::new(0.0, 0.0, -params.gravity),
-            ..Default::default()
-        };
+        let mut physics = PhysicsWorld { gravity: Vector::new(0.0, 0.0, -params.gravity), ..Default::default() };
         let ip = &mut physics.integration_parameters;
         ip.dt = params.dt;
         ip.num_solver_iterations = params.solver_iterations;
         ip.length_unit = 1.0;
         ip.normalized_prediction_distance = params.prediction_distance;
-        ip.contact_softness =
-            SpringCoefficients::new(params.contact_softness_hz, params.contact_damping_ratio);
-        let mut scene = Self {
-            physics,
-            visuals: Vec::new(),
-            seg_names: vec!["background".to_string()],
-            params: params.clone(),
-        };
+        ip.contact_softness = SpringCoefficients::new(params.contact_softness_hz, params.contact_damping_ratio);
+        let mut scene =
+            Self { physics, visuals: Vec::new(), seg_names: vec!["background".to_string()], params: params.clone() };
         let table = scene.insert(
             assets.get(AssetKind::Table),
             "table",
@@ -223,22 +203,11 @@ impl Scene {
             &mut self.physics.impulse_joints,
         );
         for (link, (lname, color)) in handles.links.iter().zip(link_names) {
-            let seg = u16::try_from(self.seg_names.len()).map_err(|_| SimError::Config {
-                field: "scene",
-                message: "more than 65535 bodies".into(),
-            })?;
-            self.seg_names.push(if lname == name {
-                name.to_string()
-            } else {
-                format!("{name}/{lname}")
-            });
+            let seg = u16::try_from(self.seg_names.len())
+                .map_err(|_| SimError::Config { field: "scene", message: "more than 65535 bodies".into() })?;
+            self.seg_names.push(if lname == name { name.to_string() } else { format!("{name}/{lname}") });
             for c in &link.colliders {
-                self.visuals.push(Visual {
-                    collider: c.handle,
-                    seg,
-                    color,
-                    checker: false,
-                });
+                self.visuals.push(Visual { collider: c.handle, seg, color, checker: false });
             }
         }
         Ok(handles)
@@ -246,32 +215,13 @@ impl Scene {
 
     /// Adds a fixed, visual-only box (a sensor collider: it is seen by the renderers and by ray casts
     /// but touches nothing). Used for the pushing goal square.
-    pub fn add_marker(
-        &mut self,
-        name: &str,
-        pose: Pose,
-        half_extents: Vector,
-        color: [f32; 3],
-    ) -> ColliderHandle {
-        let body = self
-            .physics
-            .bodies
-            .insert(RigidBodyBuilder::fixed().pose(pose));
-        let col = ColliderBuilder::cuboid(half_extents.x, half_extents.y, half_extents.z)
-            .sensor(true)
-            .build();
-        let handle = self
-            .physics
-            .colliders
-            .insert_with_parent(col, body, &mut self.physics.bodies);
+    pub fn add_marker(&mut self, name: &str, pose: Pose, half_extents: Vector, color: [f32; 3]) -> ColliderHandle {
+        let body = self.physics.bodies.insert(RigidBodyBuilder::fixed().pose(pose));
+        let col = ColliderBuilder::cuboid(half_extents.x, half_extents.y, half_extents.z).sensor(true).build();
+        let handle = self.physics.colliders.insert_with_parent(col, body, &mut self.physics.bodies);
         let seg = self.seg_names.len() as u16;
         self.seg_names.push(name.to_string());
-        self.visuals.push(Visual {
-            collider: handle,
-            seg,
-            color,
-            checker: false,
-        });
+        self.visuals.push(Visual { collider: handle, seg, color, checker: false });
         handle
     }
 
@@ -284,13 +234,7 @@ impl Scene {
     pub fn seg_of_body(&self, body: RigidBodyHandle) -> Option<u16> {
         self.visuals
             .iter()
-            .find(|v| {
-                self.physics
-                    .colliders
-                    .get(v.collider)
-                    .and_then(|c| c.parent())
-                    == Some(body)
-            })
+            .find(|v| self.physics.colliders.get(v.collider).and_then(|c| c.parent()) == Some(body))
             .map(|v| v.seg)
     }
 }

@@ -50,12 +50,7 @@ fn vec_env_matches_sequential_envs() {
     let mut obs = venv.reset(&seeds).unwrap();
     for _ in 0..3 {
         let actions: Vec<Action> = obs.iter().map(|o| o.expert_action).collect();
-        obs = venv
-            .step(&actions)
-            .unwrap()
-            .into_iter()
-            .map(|r| r.observation)
-            .collect();
+        obs = venv.step(&actions).unwrap().into_iter().map(|r| r.observation).collect();
     }
     for (k, seed) in seeds.iter().enumerate() {
         let mut env = Env::new(cfg.clone()).unwrap();
@@ -70,30 +65,14 @@ fn vec_env_matches_sequential_envs() {
 #[test]
 fn bad_actions_and_unreset_env_are_errors() {
     let mut env = Env::new(EnvConfig::new(TaskKind::BlockPicking)).unwrap();
-    assert!(matches!(
-        env.step(&Action::default()),
-        Err(SimError::NotReset)
-    ));
+    assert!(matches!(env.step(&Action::default()), Err(SimError::NotReset)));
     env.reset(0).unwrap();
-    let bad = Action {
-        dx: f32::NAN,
-        ..Action::default()
-    };
+    let bad = Action { dx: f32::NAN, ..Action::default() };
     assert!(matches!(env.step(&bad), Err(SimError::Action(_))));
-    let inf = Action {
-        dtheta: f32::INFINITY,
-        ..Action::default()
-    };
+    let inf = Action { dtheta: f32::INFINITY, ..Action::default() };
     assert!(env.step(&inf).is_err());
     // Out-of-range values are clipped, as in the paper: a huge dz moves 5 cm at most.
-    let o = env
-        .step(&Action {
-            open_ratio: 7.0,
-            dz: -3.0,
-            ..Action::default()
-        })
-        .unwrap()
-        .observation;
+    let o = env.step(&Action { open_ratio: 7.0, dz: -3.0, ..Action::default() }).unwrap().observation;
     assert!((o.tcp[2] - 0.15).abs() < 1e-5, "tcp z {}", o.tcp[2]);
 }
 
@@ -101,28 +80,20 @@ fn bad_actions_and_unreset_env_are_errors() {
 fn random_reflection_mirrors_the_clean_image() {
     let clean = run(&EnvConfig::new(TaskKind::BlockPushing), 2, 5);
     let mut cfg = EnvConfig::new(TaskKind::BlockPushing);
-    cfg.corruption = Corruption {
-        random_reflection: true,
-        ..Default::default()
-    };
+    cfg.corruption = Corruption { random_reflection: true, ..Default::default() };
     let refl = run(&cfg, 2, 5);
     let (w, h) = (clean[0].width, clean[0].height);
     let mut kinds = std::collections::HashSet::new();
     for (c, r) in clean.iter().zip(&refl) {
         let mut found = None;
-        for (k, (cols, rows)) in [(false, false), (true, false), (false, true), (true, true)]
-            .into_iter()
-            .enumerate()
-        {
+        for (k, (cols, rows)) in [(false, false), (true, false), (false, true), (true, true)].into_iter().enumerate() {
             let mut img = c.segmentation.clone();
             equiarm_sim::corrupt::reflect(&mut img, 1, w, h, cols, rows);
             if img == r.segmentation {
                 found = Some(k);
             }
         }
-        kinds.insert(
-            found.expect("a reflected observation is one of the four flips of the clean one"),
-        );
+        kinds.insert(found.expect("a reflected observation is one of the four flips of the clean one"));
     }
     assert!(kinds.len() >= 2, "reflections should vary: {kinds:?}");
 }
@@ -130,17 +101,10 @@ fn random_reflection_mirrors_the_clean_image() {
 #[test]
 fn occlusion_projection_is_a_height_map_around_the_gripper() {
     let mut cfg = EnvConfig::new(TaskKind::BlockPicking);
-    cfg.corruption = Corruption {
-        occlusion_projection: true,
-        ..Default::default()
-    };
+    cfg.corruption = Corruption { occlusion_projection: true, ..Default::default() };
     let mut env = Env::new(cfg).unwrap();
     let o = env.reset(4).unwrap();
-    let missing = o
-        .depth
-        .iter()
-        .filter(|&&v| v == equiarm_sim::corrupt::MISSING)
-        .count();
+    let missing = o.depth.iter().filter(|&&v| v == equiarm_sim::corrupt::MISSING).count();
     let zero = o.depth.iter().filter(|&&v| v == 0.0).count();
     // The table is 0.2 m below the gripper at reset; the cube top 0.15 m.
     let table = o.depth.iter().filter(|&&v| (v - 0.2).abs() < 2e-3).count();
@@ -169,11 +133,7 @@ fn expert_planners_succeed_in_19_of_20_episodes() {
 /// depend on the coarse step.
 #[test]
 fn experts_also_succeed_at_240_hz() {
-    for task in [
-        TaskKind::BlockPicking,
-        TaskKind::BlockPushing,
-        TaskKind::BlockInBowl,
-    ] {
+    for task in [TaskKind::BlockPicking, TaskKind::BlockPushing, TaskKind::BlockInBowl] {
         let mut cfg = EnvConfig::new(task);
         cfg.render = false;
         cfg.params.dt = 1.0 / 240.0;
@@ -204,11 +164,7 @@ fn holding_flag_follows_the_grasp() {
         obs = r.observation;
         if obs.holding && held_at.is_none() {
             held_at = Some(obs.step);
-            assert!(
-                obs.open_ratio < 0.8 && obs.open_ratio > 0.5,
-                "jaw around a 5 cm cube: {}",
-                obs.open_ratio
-            );
+            assert!(obs.open_ratio < 0.8 && obs.open_ratio > 0.5, "jaw around a 5 cm cube: {}", obs.open_ratio);
         }
         if r.done {
             assert!(r.info.success);
@@ -217,20 +173,8 @@ fn holding_flag_follows_the_grasp() {
     }
     assert!(held_at.is_some());
     // Opening the jaw drops the cube: no longer held.
-    let o = env
-        .step(&Action {
-            open_ratio: 1.0,
-            ..Action::default()
-        })
-        .unwrap()
-        .observation;
-    let o = env
-        .step(&Action {
-            open_ratio: 1.0,
-            ..Action::default()
-        })
-        .map(|r| r.observation)
-        .unwrap_or(o);
+    let o = env.step(&Action { open_ratio: 1.0, ..Action::default() }).unwrap().observation;
+    let o = env.step(&Action { open_ratio: 1.0, ..Action::default() }).map(|r| r.observation).unwrap_or(o);
     assert!(!o.holding);
 }
 
@@ -266,11 +210,7 @@ fn gripper_only_scene_has_a_plain_floor() {
         cfg.corruption.gripper_only = gripper_only;
         let mut env = Env::new(cfg).unwrap();
         let o = env.reset(0).unwrap();
-        let table = env
-            .segmentation_names()
-            .iter()
-            .position(|n| n == "table")
-            .unwrap() as u16;
+        let table = env.segmentation_names().iter().position(|n| n == "table").unwrap() as u16;
         let mut colours = std::collections::HashSet::new();
         for (i, s) in o.segmentation.iter().enumerate() {
             if *s == table {
@@ -279,11 +219,7 @@ fn gripper_only_scene_has_a_plain_floor() {
         }
         colours.len()
     };
-    assert_eq!(
-        floor_colours(false),
-        2,
-        "default: two checker colours (flat shading)"
-    );
+    assert_eq!(floor_colours(false), 2, "default: two checker colours (flat shading)");
     assert_eq!(floor_colours(true), 1, "gripper-only: one plain colour");
 }
 
@@ -295,14 +231,11 @@ fn config_round_trips_through_json_and_rejects_unknown_keys() {
     let text = serde_json::to_string(&cfg).unwrap();
     let back: EnvConfig = serde_json::from_str(&text).unwrap();
     assert_eq!(back, cfg);
-    let partial: EnvConfig =
-        serde_json::from_str(r#"{"task": "block_in_bowl", "params": {"substeps": 30}}"#).unwrap();
+    let partial: EnvConfig = serde_json::from_str(r#"{"task": "block_in_bowl", "params": {"substeps": 30}}"#).unwrap();
     assert_eq!(partial.task, TaskKind::BlockInBowl);
     assert_eq!(partial.params.substeps, 30);
     assert_eq!(partial.params.dt, equiarm_sim::SimParams::default().dt);
-    let err =
-        serde_json::from_str::<EnvConfig>(r#"{"task": "block_picking", "params": {"substep": 3}}"#)
-            .unwrap_err();
+    let err = serde_json::from_str::<EnvConfig>(r#"{"task": "block_picking", "params": {"substep": 3}}"#).unwrap_err();
     assert!(err.to_string().contains("substep"), "{err}");
 }
 

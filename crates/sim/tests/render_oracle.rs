@@ -29,23 +29,9 @@ fn rasteriser_matches_raycast_oracle_for_every_task() {
                 same,
                 max_dz
             );
-            assert!(
-                objects > 50,
-                "{}: the scene's objects should be in view",
-                task.name()
-            );
-            assert!(
-                same >= 0.999,
-                "{} {:?}: segmentation agreement {same}",
-                task.name(),
-                preset
-            );
-            assert!(
-                max_dz <= 1e-5,
-                "{} {:?}: depth differs by {max_dz} m",
-                task.name(),
-                preset
-            );
+            assert!(objects > 50, "{}: the scene's objects should be in view", task.name());
+            assert!(same >= 0.999, "{} {:?}: segmentation agreement {same}", task.name(), preset);
+            assert!(max_dz <= 1e-5, "{} {:?}: depth differs by {max_dz} m", task.name(), preset);
         }
     }
 }
@@ -77,53 +63,28 @@ fn world_yaw_90_is_image_rot90_from_top_down() {
     TaskState::spawn(TaskKind::BlockInBowl, &mut scene, &assets, &mut rng).unwrap();
     TaskState::spawn(TaskKind::BlockPulling, &mut scene, &assets, &mut rng).unwrap();
     scene.step();
-    let cam = Camera::new(CameraConfig {
-        elevation_deg: 90.0,
-        distance: 0.9,
-        ..ViewPreset::Angle90.config()
-    })
-    .unwrap();
+    let cam = Camera::new(CameraConfig { elevation_deg: 90.0, distance: 0.9, ..ViewPreset::Angle90.config() }).unwrap();
     let before = render(&scene, &cam);
 
     let centre = Vector::new(0.45, 0.0, 0.0);
-    let yaw = Pose::from_parts(
-        centre,
-        Rotation::from_rotation_z(std::f32::consts::FRAC_PI_2),
-    ) * Pose::from_translation(-centre);
+    let yaw = Pose::from_parts(centre, Rotation::from_rotation_z(std::f32::consts::FRAC_PI_2))
+        * Pose::from_translation(-centre);
     let handles: Vec<RigidBodyHandle> = scene.physics.bodies.iter().map(|(h, _)| h).collect();
     for h in handles {
         let b = &mut scene.physics.bodies[h];
         let p = yaw * *b.position();
         b.set_position(p, false);
     }
-    scene
-        .physics
-        .bodies
-        .propagate_modified_body_positions_to_colliders(&mut scene.physics.colliders);
+    scene.physics.bodies.propagate_modified_body_positions_to_colliders(&mut scene.physics.colliders);
     let after = render(&scene, &cam);
 
     let n = cam.width();
     let expected = rot90(&before.segmentation, n);
-    let same = expected
-        .iter()
-        .zip(&after.segmentation)
-        .filter(|(a, b)| a == b)
-        .count() as f64
-        / (n * n) as f64;
-    let unrotated = before
-        .segmentation
-        .iter()
-        .zip(&after.segmentation)
-        .filter(|(a, b)| a == b)
-        .count() as f64
-        / (n * n) as f64;
+    let same = expected.iter().zip(&after.segmentation).filter(|(a, b)| a == b).count() as f64 / (n * n) as f64;
+    let unrotated =
+        before.segmentation.iter().zip(&after.segmentation).filter(|(a, b)| a == b).count() as f64 / (n * n) as f64;
     let wrong_way = rot90(&rot90(&expected, n), n);
-    let wrong = wrong_way
-        .iter()
-        .zip(&after.segmentation)
-        .filter(|(a, b)| a == b)
-        .count() as f64
-        / (n * n) as f64;
+    let wrong = wrong_way.iter().zip(&after.segmentation).filter(|(a, b)| a == b).count() as f64 / (n * n) as f64;
     println!("rot90 agreement {same:.5}; unrotated {unrotated:.4}; rot90(k=3) {wrong:.4}");
     assert!(same >= 0.999, "rot90 agreement {same}");
     // The scene is not symmetric, so the test can tell the directions apart.
