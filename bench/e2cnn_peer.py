@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Peer benchmark for crates/nn: the Equi SAC actor (PyTorch + e2cnn, the authors' stack) and the
-CNN SAC actor (plain PyTorch), same shapes as equiarm_nn's nets (PAPER_SPEC §1.4, §1.8).
+CNN SAC actor (plain PyTorch), same shapes as equiarm_nn's nets (docs/paper.md §1.4, §1.8).
 
 Run with any python3: on first use it creates a venv under ~/.cache/equiarm/venvs, installs torch and e2cnn
 from PyPI into it, and re-executes itself there. Prints one JSON object per line:

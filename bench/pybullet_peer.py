@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """PyBullet peer for equiarm_sim's step+render benchmark: a BulletArm-like close-loop env step.
 
-What one step does (as BulletArm's CloseLoopEnv.step with a Kuka, PAPER_SPEC section 3.2):
+What one step does (as BulletArm's CloseLoopEnv.step with a Kuka, docs/paper.md §3.2):
   * physics: dt 1/240, 50 solver iterations, gravity -10; Kuka iiwa with gripper
     (pybullet_data kuka_iiwa/kuka_with_gripper2.sdf, base at (-0.2, 0, 0)), the plane, one 5 cm cube
     loaded from the repository's urdf/cube.urdf;
@@ -13,7 +13,7 @@ What one step does (as BulletArm's CloseLoopEnv.step with a Kuka, PAPER_SPEC sec
     BulletArm's camera_side_rgbd does; camera eye (1, 0, 0.6), target (0.45, 0, 0), up (-1, 0, 0),
     fov 40, near 0.1, far 3.
 
---mode fixed (a conservative lower bound of the above, as in SIM_NOTES): one IK solve, the finger
+--mode fixed (a conservative lower bound of the above): one IK solve, the finger
 command, and exactly 100 physics steps; then the same two renders.
 
 --mode floating (the cheapest PyBullet step we could call BulletArm-like): no arm; the repository's

@@ -1,4 +1,4 @@
-//! Throughput and peak memory of the `equiarm sim` node (ARCHITECTURE §6: a sim node stays under
+//! Throughput and peak memory of the `equiarm sim` node (docs/architecture.md#memory-budget: a sim node stays under
 //! 150 MB). Spawns the `equiarm` binary built beside this example, drives it over DDS with an
 //! in-process expert policy (echoes `expert_action` with the right `obs_seq`) for N steps, and prints
 //! steps/s, episodes, successes and the node's peak RSS (`VmHWM` of `/proc/PID/status`, Linux only).
@@ -10,11 +10,11 @@
 //! `--delay-ms=D` makes the driver think D ms per step (a policy's inference time).
 //!
 //! NOTE: RustDDS 0.15 keeps acked samples of a reliable writer until its cache-cleaning timer, which
-//! runs every 6 s (`rtps/writer.rs`, not configurable; DDS_NOTES §2.5), so up to ~12 s of samples are
+//! runs every 6 s (`rtps/writer.rs`, not configurable), so up to ~12 s of samples are
 //! held. The node's peak RSS is therefore about 22 MB + 12 s × steps/s × 0.49 MB (one Observation on
 //! `observation` and two inside the Transition, 152 px RGBD): measured (debug profile, 2 shared cores)
 //! 139 MB at 21 steps/s, 183 MB at 35 steps/s, 257 MB after 500 and 399 MB after 1000 unthrottled
-//! steps (~130 steps/s). The 150 MB budget of ARCHITECTURE §6 holds up to ~20 steps/s.
+//! steps (~130 steps/s). The 150 MB budget of docs/architecture.md#memory-budget holds up to ~20 steps/s.
 //! `--camera` also subscribes to the camera topics (the node copies images only while someone does).
 //! Run it where DDS multicast works (e.g. inside `unshare -n` with loopback multicast, as the tests do).
 

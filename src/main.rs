@@ -17,9 +17,11 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Message types: list them, or show one's definition (like `ros2 interface`).
+    #[command(after_help = "Examples:\n  equiarm msg list\n  equiarm msg show equiarm_msgs/msg/Observation")]
     #[command(subcommand)]
     Msg(MsgCommand),
     /// Topics: print a topic's messages.
+    #[command(after_help = "Examples:\n  equiarm topic echo /episodes -t equiarm_msgs/msg/EpisodeResult --count 5")]
     #[command(subcommand)]
     Topic(TopicCommand),
     /// Simulated environment node: one of the paper's five tasks on the lock-step protocol.
@@ -30,24 +32,40 @@ enum Command {
     /// `camera/...`. Commands for another seq are ignored; commands with NaN/inf are rejected (nothing
     /// moves). Out-of-range values are clipped, as the paper's environments do: dx, dy, dz to
     /// +-0.05 m, dtheta to +-pi/4 rad, open_ratio to [0, 1], and the target position to the workspace.
+    #[command(
+        after_help = "Examples:\n  equiarm sim --task block_pulling --seed 0 --namespace /env0\n  equiarm sim --task drawer_opening --namespace /eval --eval\n  equiarm sim snapshot --task block_in_bowl --out snapshots"
+    )]
     Sim(SimCommand),
     /// Records topics into a rosbag2-compatible MCAP bag until Ctrl-C (the recorder node).
+    #[command(
+        after_help = "Examples:\n  equiarm record -o runs/today --all\n  equiarm record -o runs/cmds /env0/gripper_cmd:equiarm_msgs/msg/GripperCommand --compression lz4"
+    )]
     Record(RecordArgs),
     /// Bags: describe, evaluate, repair.
+    #[command(
+        after_help = "Examples:\n  equiarm bag info runs/today\n  equiarm bag eval runs/today --json\n  equiarm bag play runs/today --rate 2 --remap /env0/observation:/replay/observation\n  equiarm bag recover runs/killed runs/recovered"
+    )]
     #[command(subcommand)]
     Bag(BagCommand),
-    /// Trains SAC from demonstrations (PAPER_SPEC §2): in this process (`--in-process`), or as the
+    /// Trains SAC from demonstrations (docs/paper.md §2): in this process (`--in-process`), or as the
     /// trainer node over DDS (transitions from /transitions, weights out on /policy/weights).
     ///
     /// Writes metrics.csv/jsonl (CleanRL names), learning_curve.png, checkpoints/ and config.json into
     /// --run-dir; prints an evaluation table at the end. Ctrl-C stops with a checkpoint; --resume continues.
+    #[command(
+        after_help = "Examples:\n  equiarm train --in-process --task block_pulling --model equi --seed 0 --run-dir runs/pull_s0\n  equiarm train --resume runs/pull_s0\n  equiarm train --task block_pulling --num-envs 5 --run-dir runs/dds_s0\n  equiarm train --print-config --preset paper --task block_in_bowl"
+    )]
     Train(Box<equiarm_nodes::train_cli::TrainArgs>),
     /// Policy node: answers each Observation on `observation` (relative to --namespace) with a
     /// GripperCommand on `gripper_cmd` naming its seq: the actor's sampled or greedy action, the
     /// expert's, or a random one. In sample/greedy mode it takes new actor weights from
     /// /policy/weights (transient-local) and logs `weights version N (updates U)` on each switch.
+    #[command(
+        after_help = "Examples:\n  equiarm policy --namespace /env0 --mode expert\n  equiarm policy --namespace /env0 --mode sample --expert-episodes 4 --max-lead 5\n  equiarm policy --namespace /eval --mode greedy --checkpoint runs/pull_s0"
+    )]
     Policy(equiarm_nodes::policy_cli::PolicyArgs),
     /// Networks: diagnostics of saved (or freshly initialised) equivariant networks.
+    #[command(after_help = "Examples:\n  equiarm nn check-equivariance --fresh --net equi-actor --config reduced")]
     #[command(subcommand)]
     Nn(NnCommand),
 }
@@ -465,4 +483,43 @@ fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
 fn own_text(t: &TypeInfo) -> Option<&'static str> {
     let sep = format!("\n{}\nMSG: ", "=".repeat(80));
     Some(t.definition.split(sep.as_str()).next().unwrap_or(t.definition))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// The example lines of a command's `--help` (its `after_help`, lines starting with `equiarm `).
+    fn examples(cmd: &clap::Command) -> Vec<String> {
+        let text = cmd.get_after_help().map(|h| h.to_string()).unwrap_or_default();
+        text.lines().map(str::trim).filter(|l| l.starts_with("equiarm ")).map(str::to_string).collect()
+    }
+
+    #[test]
+    fn every_subcommand_help_has_examples_that_parse() {
+        let root = Cli::command();
+        for sub in root.get_subcommands() {
+            let lines = examples(sub);
+            assert!(!lines.is_empty(), "`equiarm {} --help` has no example", sub.get_name());
+            for line in &lines {
+                let argv: Vec<&str> = line.split_whitespace().collect();
+                assert_eq!(argv[1], sub.get_name(), "example '{line}' is not for `equiarm {}`", sub.get_name());
+                if let Err(e) = Cli::try_parse_from(&argv) {
+                    panic!("example '{line}' does not parse: {e}");
+                }
+            }
+            // Every leaf command under it is shown by at least one example.
+            for leaf in sub.get_subcommands().filter(|c| c.get_name() != "help") {
+                let shown = lines.iter().any(|l| l.split_whitespace().nth(2) == Some(leaf.get_name()));
+                assert!(shown, "no example of `equiarm {} {}`", sub.get_name(), leaf.get_name());
+            }
+        }
+    }
+
+    #[test]
+    fn the_example_check_sees_a_bad_example() {
+        assert!(Cli::try_parse_from(["equiarm", "train", "--no-such-flag"]).is_err());
+        assert!(Cli::try_parse_from(["equiarm", "bag", "info", "x"]).is_ok());
+    }
 }

@@ -1,5 +1,5 @@
 //! Learning over DDS: two `equiarm sim` + `equiarm policy --mode sample` pairs and one `equiarm train`
-//! trainer node with a tiny network (ARCHITECTURE §2). Guards that the policies switch to the
+//! trainer node with a tiny network (docs/architecture.md#the-loop-over-dds). Guards that the policies switch to the
 //! trainer's weights, that no transition is lost between the sims and the trainer, that SIGINT stops
 //! every node cleanly with a checkpoint; and, without DDS, how the trainer stores transitions (each
 //! frame once, expert demos only from successful episodes, never the eval env) and how the policy

@@ -1,6 +1,6 @@
 //! `equiarm sim` over DDS: the binary is spawned for a task and driven from an in-test node acting
 //! as the expert policy (it echoes `expert_action` with the right `obs_seq`). Guards the lock-step
-//! protocol of ARCHITECTURE §2: seqs, re-publication on timeout, stale and non-finite commands
+//! protocol of docs/architecture.md#the-loop-over-dds: seqs, re-publication on timeout, stale and non-finite commands
 //! ignored without a step, Transitions and EpisodeResults on the shared topics, camera topics.
 //! Domains 90–99 are this file's.
 

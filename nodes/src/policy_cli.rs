@@ -38,7 +38,7 @@ pub struct PolicyArgs {
     #[arg(long, default_value = "/policy/weights")]
     pub weights_topic: String,
     /// Answer the first K episodes of the env with the expert's action (source EXPERT): the
-    /// demonstrations of PAPER_SPEC §2 (the trainer keeps only the successful ones).
+    /// demonstrations of docs/paper.md §2 (the trainer keeps only the successful ones).
     #[arg(long, default_value_t = 0)]
     pub expert_episodes: u32,
     /// Flow control for the paper's update-to-data ratio: once the trainer has started updating,

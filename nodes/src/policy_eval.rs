@@ -1,9 +1,9 @@
 //! `equiarm bag eval BAG --policy CKPT`: runs an actor over the observations recorded in a bag's
 //! `Transition`s and reports, per action dimension, how its greedy action (tanh of the mean) agrees
 //! with the action that was recorded, both in the agent's normalised [-1, 1] units
-//! (p = 2·open_ratio − 1, dx/0.05, dy/0.05, dz/0.05, dθ/(π/4), PAPER_SPEC §1.2).
+//! (p = 2·open_ratio − 1, dx/0.05, dy/0.05, dz/0.05, dθ/(π/4), docs/paper.md §1.2).
 //!
-//! Network input, as the paper feeds it (PAPER_SPEC §1.1): channels R, G, B (÷255), depth (m) and
+//! Network input, as the paper feeds it (docs/paper.md §1.1): channels R, G, B (÷255), depth (m) and
 //! the holding flag as a constant plane, centre-cropped to the network's input size.
 //!
 //! ## Limitations

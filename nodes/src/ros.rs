@@ -10,7 +10,7 @@
 //!
 //! ## Limitations
 //! - Parameter services are off: ros2-client answers them only with the Fast DDS ("Enhanced")
-//!   service mapping, which rmw_cyclonedds clients cannot use (DDS_NOTES §2.7). Configuration comes
+//!   service mapping, which rmw_cyclonedds clients cannot use. Configuration comes
 //!   from the command line instead.
 //! - RustDDS keeps up to 8192 unacknowledged samples per reliable writer and has no back-pressure:
 //!   publish large samples only as fast as the lock-step loop needs.
@@ -27,7 +27,7 @@ use ros2_client::dds::rustdds::DomainParticipantBuilder;
 use ros2_client::qos::{Durability, History, QosProfile, WhenFull};
 use ros2_client::{Context, MessageInfo, MessageTypeName, Name, Node, NodeName, NodeOptions, ReadError};
 
-/// QoS profiles of the equiarm topic graph (ARCHITECTURE §4).
+/// QoS profiles of the equiarm topic graph (docs/architecture.md#qos).
 pub mod qos {
     use super::*;
 
@@ -330,7 +330,7 @@ pub async fn shutdown_signal() -> anyhow::Result<&'static str> {
 }
 
 /// The default log filter: our crates at info, RustDDS's per-datagram warnings and error floods off
-/// (DDS_NOTES §3.6). The writer's "send_message_to_readers: No locators" warning is off too: on a host
+/// (RustDDS logs a warning per malformed or unexpected datagram). The writer's "send_message_to_readers: No locators" warning is off too: on a host
 /// whose loopback has no multicast (Linux's default) RustDDS repeats it for every sample sent to a
 /// same-host reader, which it still reaches through its loopback fallback (train.sh's trainer logged
 /// ~1,400 of them in its first 90 s). `RUST_LOG` overrides it.

@@ -1,5 +1,5 @@
 //! `equiarm sim`: one simulated environment ([`equiarm_sim::Env`]) on the ROS 2 graph, in the
-//! lock-step protocol of ARCHITECTURE §2. The node only maps topics to library calls:
+//! lock-step protocol of docs/architecture.md#the-loop-over-dds. The node only maps topics to library calls:
 //!
 //! - publishes an `Observation` (seq, env, episode, step, rgb8 colour, 32FC1 depth in metres, holding,
 //!   the expert's action with `source = EXPERT` and `obs_seq = seq`) on `observation` (relative to the
@@ -34,7 +34,7 @@ use log::{debug, info, warn};
 
 use crate::ros::{Publisher, RosNode, RosOptions, qos, shutdown_signal};
 
-/// Discount of `EpisodeResult.discounted_return` (the trainer's gamma, PAPER_SPEC).
+/// Discount of `EpisodeResult.discounted_return` (the trainer's gamma, docs/paper.md §2).
 pub const GAMMA: f32 = 0.99;
 /// Frame of observations, transitions and commands.
 pub const WORLD_FRAME: &str = "world";

@@ -21,9 +21,9 @@ pub struct TrainArgs {
     /// Run the envs inside this process (no DDS): the transport-free loop.
     #[arg(long)]
     pub in_process: bool,
-    /// Preset: `reduced16` (38 → 32 px frames, hidden 16, the paper's update count: about 30 min
-    /// of training on 2 cores), `reduced` (the same frames at hidden 8 and a quarter of the
-    /// updates: fast, learns little) or `paper` (PAPER_SPEC §2; meant for a GPU).
+    /// Preset: `reduced16` (38 → 32 px frames, hidden 16, 1.5× the paper's update count: about
+    /// 45 min of training on 2 cores), `reduced` (the same frames at hidden 8 and a quarter of the
+    /// paper's updates: fast, learns little) or `paper` (docs/paper.md §2; meant for a GPU).
     #[arg(long, default_value = TrainConfig::DEFAULT_PRESET)]
     pub preset: String,
     /// JSON config file (replaces the preset; flags below still override it).

@@ -4,7 +4,7 @@
 //! `TrainerStatus` on `/trainer/status` once per second.
 //!
 //! - One update per `num_envs` non-eval transitions once the replay holds `training_starts`
-//!   (PAPER_SPEC §2). Updates run on tokio's blocking pool while this task keeps taking samples
+//!   (docs/paper.md §2). Updates run on tokio's blocking pool while this task keeps taking samples
 //!   (a keep-last reader that is not read drops samples); rows received meanwhile wait in a queue and
 //!   owed updates are caught up.
 //! - Weights: version 1 (the initial actor) at start, then after the first update and every

@@ -1,5 +1,5 @@
 //! The equivariant kernel basis solver: one generic construction for every pair of
-//! representations and kernel sizes 1 and 3 (PAPER_SPEC §1.6, ARCHITECTURE §5).
+//! representations and kernel sizes 1 and 3 (docs/paper.md §1.6, docs/architecture.md#equivariant-layers).
 //!
 //! A kernel `K: Z² → R^{d_out×d_in}` is equivariant when `K(g·x) = ρ_out(g) K(x) ρ_in(g)⁻¹` for all
 //! `g`. We start from the band-limited template space `T` of scalar filters (3×3: the 6 functions
@@ -22,7 +22,7 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum BasisError {
     /// Only 1×1 and 3×3 template spaces are defined.
-    #[error("unsupported kernel size {0}: only 1 and 3 are implemented (PAPER_SPEC §1.6)")]
+    #[error("unsupported kernel size {0}: only 1 and 3 are implemented (docs/paper.md §1.6)")]
     KernelSize(usize),
     /// Input and output representations belong to different groups.
     #[error("representations of different groups: {0} and {1}")]

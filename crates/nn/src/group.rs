@@ -1,7 +1,7 @@
 //! Finite planar symmetry groups: cyclic `C_n` and dihedral `D_n`, their action on the plane, on
 //! harmonic template coefficients and on the pixel grid.
 //!
-//! Conventions (PAPER_SPEC §1.3, §1.6): plane coordinates are x = column → right, y = up. An element
+//! Conventions (docs/paper.md §1.3, §1.6): plane coordinates are x = column → right, y = up. An element
 //! is `(f, k)` with `f ∈ {0, 1}` (always 0 for `C_n`) and `k ∈ Z_n`; it acts on the plane as
 //! `Rot(2πk/n) ∘ Flip^f`, where `Flip` mirrors about the vertical image axis (x → −x, e2cnn's
 //! `axis = π/2`). Multiplication: `(f₁,k₁)(f₂,k₂) = (f₁⊕f₂, k₁ + (−1)^{f₁} k₂ mod n)`.
@@ -130,7 +130,7 @@ impl Group {
     }
 
     /// The action `κ ↦ κ∘g⁻¹` of `g` on the coefficients of the harmonic template basis
-    /// `[δ_centre, R·1, R·cosφ, R·sinφ, R·cos2φ, R·sin2φ]` (PAPER_SPEC §1.6), as a 6×6 matrix `A`
+    /// `[δ_centre, R·1, R·cosφ, R·sinφ, R·cos2φ, R·sin2φ]` (docs/paper.md §1.6), as a 6×6 matrix `A`
     /// with `coeff(κ∘g⁻¹) = A · coeff(κ)`. Exact for every element, on or off the grid.
     pub fn harmonic_action(&self, g: Element) -> [[f64; 6]; 6] {
         let mut a = [[0.0; 6]; 6];

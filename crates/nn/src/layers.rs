@@ -10,7 +10,7 @@
 //! Limitations: stride 1 only; kernel sizes 1 and 3 (see [`crate::basis`]); pointwise ReLU and
 //! max-pooling are only equivariant for permutation representations (trivial, regular,
 //! quotient) and are refused otherwise; exact image equivariance needs even sizes before each
-//! 2×2 pool (PAPER_SPEC §1.4) and group elements that act on the pixel grid.
+//! 2×2 pool (docs/paper.md §1.4) and group elements that act on the pixel grid.
 
 use crate::basis::{BasisError, kernel_basis};
 use crate::group::Element;
@@ -108,7 +108,7 @@ struct Block {
 /// - Output field type: `out_type`.
 /// - Parameters: per block of consecutive identical (output rep, input rep) fields, a weight
 ///   `[out_fields, in_fields, basis_len]`; per output run containing the trivial irrep, a bias
-///   `[out_fields, multiplicity]` (bias only on trivial components, PAPER_SPEC §1.6).
+///   `[out_fields, multiplicity]` (bias only on trivial components, docs/paper.md §1.6).
 #[derive(Module, Debug)]
 pub struct EquivariantConv {
     /// Free weights, one per non-zero block, in block order (output runs outer, input runs inner).

@@ -1,4 +1,4 @@
-//! The paper's networks (PAPER_SPEC §1.4–1.9, §4), parameterised by hidden size and input size so
+//! The paper's networks (docs/paper.md §1.4–1.9, §4), parameterised by hidden size and input size so
 //! that one code base serves the paper config (GPU) and a reduced CPU config.
 //!
 //! - [`EquiActor`], [`EquiCritic`]: Equivariant SAC, group D4 (§1.4, §1.5).
@@ -10,7 +10,7 @@
 //! 128 → 8 in their first four layers before an unpadded tail (8 → 6 → 3 → 1); a smaller input
 //! drops the first `4 − p` layers, as the authors' `EquivariantEncoder64` drops the 128×128 one.
 //! At 128 px the layer structure is exactly the paper's. Actions are `(p, dx, dy, dz, dθ)`
-//! (PAPER_SPEC §1.2).
+//! (docs/paper.md §1.2).
 //!
 //! Limitations: the SAC sampling helper is in [`gaussian_sample`]; losses and the update live in
 //! the trainer, not here.
@@ -35,7 +35,7 @@ pub enum NetError {
     Layer(#[from] LayerError),
 }
 
-/// Log-std clamp range (SAC, PAPER_SPEC §1.4).
+/// Log-std clamp range (SAC, docs/paper.md §1.4).
 pub const LOG_STD_MIN: f32 = -20.0;
 /// Upper log-std clamp.
 pub const LOG_STD_MAX: f32 = 2.0;
@@ -135,7 +135,7 @@ fn plain_convs(
     (convs, cin)
 }
 
-/// The 7-layer equivariant encoder `EquivariantEncoder128` (PAPER_SPEC §1.4 layers 1–7).
+/// The 7-layer equivariant encoder `EquivariantEncoder128` (docs/paper.md §1.4 layers 1–7).
 ///
 /// Input field type: `in_channels × trivial`; output: `hidden × regular` at 1×1.
 #[derive(Module, Debug)]
@@ -186,14 +186,14 @@ impl EquiEncoder {
 }
 
 /// The field type of the Equi SAC actor's output (11 channels): `irrep(1,1)` (dx, dy) ⊕
-/// `quotient(C4)` (θ, −θ parts) ⊕ 7 × trivial (p, dz, 5 log-stds). PAPER_SPEC §1.4.
+/// `quotient(C4)` (θ, −θ parts) ⊕ 7 × trivial (p, dz, 5 log-stds). docs/paper.md §1.4.
 pub fn actor_out_type(group: Group) -> FieldType {
     FieldType::new(group, vec![Representation::irrep(group, 1, 1), Representation::quotient_by_rotations(group)])
         .concat(&FieldType::trivial(group, 7))
 }
 
 /// The field type of the lifted action (6 channels): 2 × trivial (p, dz) ⊕ `irrep(1,1)` (dx, dy)
-/// ⊕ `quotient(C4)` (dθ, −dθ). PAPER_SPEC §1.5.
+/// ⊕ `quotient(C4)` (dθ, −dθ). docs/paper.md §1.5.
 pub fn action_type(group: Group) -> FieldType {
     FieldType::trivial(group, 2).concat(&FieldType::new(
         group,
@@ -211,7 +211,7 @@ pub fn lift_action(a: Tensor<2>) -> Tensor<4> {
 }
 
 /// Decode an actor head's 11 channels `[B, 11]` into `(mean, log_std)`, both `[B, 5]` in action
-/// order (PAPER_SPEC §1.4 `getOutput`).
+/// order (docs/paper.md §1.4 `getOutput`).
 fn decode_equi(raw: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
     let col = |i: usize| raw.clone().narrow(1, i, 1);
     let dtheta = col(2) - col(3);
@@ -357,7 +357,7 @@ impl Critic for EquiCritic {
     }
 }
 
-/// The plain CNN encoder `SACEncoderFullyConv` (PAPER_SPEC §1.8): widths `n/4, n/2, n, 2n, 2n,
+/// The plain CNN encoder `SACEncoderFullyConv` (docs/paper.md §1.8): widths `n/4, n/2, n, 2n, 2n,
 /// 4n, 4n` (paper n = 64: 16 … 256).
 #[derive(Module, Debug)]
 pub struct CnnEncoder {
@@ -467,7 +467,7 @@ impl Critic for CnnCritic {
     }
 }
 
-/// SEN fc2 encoder `SACEncoderSimFC2` (PAPER_SPEC §1.9): convs of widths `n/2, n, 2n, 4n`
+/// SEN fc2 encoder `SACEncoderSimFC2` (docs/paper.md §1.9): convs of widths `n/2, n, 2n, 4n`
 /// (3×3, pad 1, pooled down to 8×8), `2n` at 8×8, flatten, Linear → `8n` + ReLU, declared as
 /// `n` regular D4 fields at 1×1 (paper n = 32).
 #[derive(Module, Debug)]
@@ -567,7 +567,7 @@ impl Critic for SenCritic {
     }
 }
 
-/// C8 rotation-estimation classifier (PAPER_SPEC §4 "Equi"): [`EquiEncoder`] over C8 + 1×1
+/// C8 rotation-estimation classifier (docs/paper.md §4 "Equi"): [`EquiEncoder`] over C8 + 1×1
 /// `hidden × regular → 8 × trivial` (class logits, invariant).
 #[derive(Module, Debug)]
 pub struct RotEquiNet {
@@ -603,7 +603,7 @@ impl RotEquiNet {
     }
 }
 
-/// Rotation-estimation CNN (`cnn_sim`, PAPER_SPEC §4): widths `n/4, n/2, n, 2n` (pooled to 8×8),
+/// Rotation-estimation CNN (`cnn_sim`, docs/paper.md §4): widths `n/4, n/2, n, 2n` (pooled to 8×8),
 /// `4n` pad 1, `4n` pad 0, pool, `2n` pad 0, 1×1 → 8 logits (paper n = 64).
 #[derive(Module, Debug)]
 pub struct RotCnnNet {
@@ -638,7 +638,7 @@ impl RotCnnNet {
     }
 }
 
-/// SAC's squashed Gaussian sample (PAPER_SPEC §1.4): with noise `eps ~ N(0, 1)` `[B, 5]`,
+/// SAC's squashed Gaussian sample (docs/paper.md §1.4): with noise `eps ~ N(0, 1)` `[B, 5]`,
 /// `x = mean + std·eps`, `a = tanh(x)`, `log π = Σ_i [log N(x_i; mean_i, std_i) − log(1 − a_i² + 1e-6)]`.
 /// Returns `(a, log π [B, 1], tanh(mean))`.
 pub fn gaussian_sample(mean: Tensor<2>, log_std: Tensor<2>, eps: Tensor<2>) -> (Tensor<2>, Tensor<2>, Tensor<2>) {

@@ -1,5 +1,5 @@
 //! Ordinary (non-equivariant) layers for the CNN and SEN baselines, with the authors'
-//! initialisation (xavier-uniform weights, zero bias, PAPER_SPEC §1.8) drawn from our own seeded
+//! initialisation (xavier-uniform weights, zero bias, docs/paper.md §1.8) drawn from our own seeded
 //! RNG, so that they are reproducible like the equivariant ones.
 
 use crate::init::Init;

@@ -392,7 +392,7 @@ mod tests {
 
     #[test]
     fn standard_irrep_matches_paper_action_convention() {
-        // PAPER_SPEC §1.3: rot90 ⇒ (dx,dy) → (−dy,dx); mirror ⇒ (dx,dy) → (dx,−dy).
+        // docs/paper.md §1.3: rot90 ⇒ (dx,dy) → (−dy,dx); mirror ⇒ (dx,dy) → (dx,−dy).
         let g = Group::dihedral(4);
         let r = Representation::irrep(g, 1, 1);
         let m = r.matrix(Element { flip: 0, rot: 1 });

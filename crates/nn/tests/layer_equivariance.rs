@@ -1,4 +1,4 @@
-//! Every layer kind satisfies `f(g·x) = g·f(x)` (PAPER_SPEC §1.3) for every group element acting
+//! Every layer kind satisfies `f(g·x) = g·f(x)` (docs/paper.md §1.3) for every group element acting
 //! on the pixel grid, random inputs and random weights and biases, to relative error < 1e-4.
 
 mod common;

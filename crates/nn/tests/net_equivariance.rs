@@ -1,4 +1,4 @@
-//! Every equivariant network satisfies PAPER_SPEC §1.3's identities for all group elements on
+//! Every equivariant network satisfies docs/paper.md §1.3's identities for all group elements on
 //! the pixel grid, random inputs and random weights, to relative error < 1e-4. The nets run at
 //! the paper's 128 px (exact layer structure, 4 pools) with a small hidden size to keep CI fast.
 
@@ -63,7 +63,7 @@ fn equi_critic_is_invariant() {
     for e in &errs {
         assert!(e.relative_error < TOL, "{:?}: {}", e.element, e.relative_error);
     }
-    // Q(g·s, g·a) = Q(s, a) with the action transformed as in PAPER_SPEC §1.3 (mirror).
+    // Q(g·s, g·a) = Q(s, a) with the action transformed as in docs/paper.md §1.3 (mirror).
     let a = values(act.clone());
     let mirrored: Vec<f32> = a.chunks(5).flat_map(|c| [c[0], c[1], -c[2], c[3], -c[4]]).collect();
     let (q1, q2) = critic.forward(obs.clone(), act);

@@ -1,4 +1,4 @@
-//! Parameter counts at the paper's settings equal PAPER_SPEC §1.7 and §4 exactly: the proof that
+//! Parameter counts at the paper's settings equal docs/paper.md §1.7 and §4 exactly: the proof that
 //! the function space matches e2cnn's (and the authors' CNNs). Networks are only built, not run.
 
 mod common;

@@ -1,4 +1,4 @@
-//! Benchmark: one SAC update (critic → actor → α → target, PAPER_SPEC §2) on random batches, for
+//! Benchmark: one SAC update (critic → actor → α → target, docs/paper.md §2) on random batches, for
 //! each network family and preset (`reduced16`: hidden 16, 32 px, batch 64; `paper`: hidden 64,
 //! 128 px, batch 128), at each thread count, beside PyTorch + e2cnn running the same update on the
 //! authors' networks (`bench/sac_update_peer.py`, which installs torch and e2cnn into its own venv
@@ -213,7 +213,7 @@ fn main() {
     for preset_name in &presets {
         for &model in &models {
             let preset = TrainConfig::preset(preset_name, "block_pulling").expect("preset");
-            // SEN's paper hidden size is 32 (PAPER_SPEC §1.9).
+            // SEN's paper hidden size is 32 (docs/paper.md §1.9).
             let hidden = if model == ModelKind::Sen && *preset_name == "paper" { 32 } else { preset.agent.hidden };
             let hidden = args.hidden.unwrap_or(hidden);
             let (s, b) = (preset.agent.input_size, args.batch.unwrap_or(preset.batch_size));

@@ -1,4 +1,4 @@
-//! The SAC-from-demonstrations agent of PAPER_SPEC §2 (`sacfd`, with RAD or DrQ), over the
+//! The SAC-from-demonstrations agent of docs/paper.md §2 (`sacfd`, with RAD or DrQ), over the
 //! networks of `equiarm_nn`:
 //!
 //! - critic step: `y = r + γ·mask·(min Q_targ(s′, a′) − α·log π(a′|s′))`, `a′ ~ π(s′)`, loss
@@ -9,7 +9,7 @@
 //! - Polyak target update with τ.
 //!
 //! With DrQ (K next-observation crops, M observation crops) the target is the mean over the K
-//! crops, and the critic, actor and α losses run over the M crops (PAPER_SPEC §1.11). RAD is K = M
+//! crops, and the critic, actor and α losses run over the M crops (docs/paper.md §1.11). RAD is K = M
 //! = 1 with one crop shared by obs and next_obs (the caller builds the crops).
 //!
 //! Noise comes from the agent's own seeded RNG, so updates are bitwise repeatable on one machine.
@@ -81,7 +81,7 @@ pub enum AgentError {
     },
 }
 
-/// The network family (PAPER_SPEC §1.4–1.9), by the name used on the command line, in configs,
+/// The network family (docs/paper.md §1.4–1.9), by the name used on the command line, in configs,
 /// in `PolicyWeights.model` and in checkpoint manifests.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -120,11 +120,11 @@ impl ModelKind {
 pub enum ActMode {
     /// `tanh(mean + std·ε)`: exploration during training.
     Sample,
-    /// `tanh(mean)`: evaluation (PAPER_SPEC §2).
+    /// `tanh(mean)`: evaluation (docs/paper.md §2).
     Greedy,
 }
 
-/// SAC hyper-parameters (PAPER_SPEC §2). Every field has the paper's value by default.
+/// SAC hyper-parameters (docs/paper.md §2). Every field has the paper's value by default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct AgentConfig {
@@ -175,7 +175,7 @@ impl AgentConfig {
 }
 
 /// One training batch, already cropped: `obs` holds `m` copies of the `b` rows (copy `j` of row
-/// `i` at index `j·b + i`), each `5 × s × s` (PAPER_SPEC §1.1 channels); `next_obs` holds `k`
+/// `i` at index `j·b + i`), each `5 × s × s` (docs/paper.md §1.1 channels); `next_obs` holds `k`
 /// copies. Actions are normalised to [−1, 1], order (p, dx, dy, dz, dθ).
 #[derive(Clone, Debug, Default)]
 pub struct Batch {

@@ -1,4 +1,4 @@
-//! Crop augmentation and batch assembly for the networks (PAPER_SPEC §1.1, §1.11): the RAD random
+//! Crop augmentation and batch assembly for the networks (docs/paper.md §1.1, §1.11): the RAD random
 //! crop (one uniform offset in `{0..=size-out}²` per transition), the centre crop used for acting and
 //! evaluation, and the `[B, 5, out, out]` input batch built from stored frames.
 //!

@@ -1,7 +1,7 @@
 //! The run configuration: one typed, validated struct (`#[serde(deny_unknown_fields)]`), echoed
 //! into every run directory and checkpoint manifest.
 //!
-//! Three presets per task: [`TrainConfig::paper`] (PAPER_SPEC §2: 152 px frames cropped to 128,
+//! Three presets per task: [`TrainConfig::paper`] (docs/paper.md §2: 152 px frames cropped to 128,
 //! hidden 64, batch 128, 5 envs, 5,000 updates; 10,000 for block in bowl),
 //! [`TrainConfig::reduced`] (the same algorithm on a 2-core CPU: smaller frames and networks,
 //! fewer updates and evaluation episodes; see its doc for every difference), and
@@ -24,7 +24,7 @@ pub struct ConfigError {
     pub message: String,
 }
 
-/// Image augmentation (PAPER_SPEC §1.11).
+/// Image augmentation (docs/paper.md §1.11).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Augmentation {
@@ -37,7 +37,7 @@ pub enum Augmentation {
         /// Critic/actor crops.
         m: usize,
     },
-    /// Centre crop only (the no-crop ablation of PAPER_SPEC §5.4 keeps the full frame instead).
+    /// Centre crop only (the no-crop ablation of docs/paper.md §5.4 keeps the full frame instead).
     Center,
 }
 
@@ -89,7 +89,7 @@ impl Default for TrainConfig {
     }
 }
 
-/// The paper's demo count for a task (PAPER_SPEC §2).
+/// The paper's demo count for a task (docs/paper.md §2).
 pub fn paper_demos(task: &str) -> usize {
     match task {
         "block_pulling" | "block_pushing" => 20,
@@ -100,7 +100,7 @@ pub fn paper_demos(task: &str) -> usize {
 }
 
 impl TrainConfig {
-    /// The paper's settings for `task` (PAPER_SPEC §2). Meant for a GPU: an update of the
+    /// The paper's settings for `task` (docs/paper.md §2). Meant for a GPU: an update of the
     /// paper-size Equi nets takes tens of seconds on 2 CPU cores.
     pub fn paper(task: &str) -> Self {
         TrainConfig {

@@ -1,6 +1,6 @@
-//! One square camera frame stored compactly for the replay buffer (ARCHITECTURE §6): colour as rgb8,
+//! One square camera frame stored compactly for the replay buffer (docs/architecture.md#memory-budget): colour as rgb8,
 //! depth in metres as `f16`, and the gripper's holding flag, plus the decoder that writes the 5-plane
-//! network input of PAPER_SPEC §1.1 (`[R/255, G/255, B/255, depth m, holding]`) for a crop window.
+//! network input of docs/paper.md §1.1 (`[R/255, G/255, B/255, depth m, holding]`) for a crop window.
 //!
 //! ## Limitations
 //!
@@ -85,7 +85,7 @@ impl std::fmt::Debug for Frame {
     }
 }
 
-/// Number of planes in the network input (PAPER_SPEC §1.1): R, G, B, depth, holding.
+/// Number of planes in the network input (docs/paper.md §1.1): R, G, B, depth, holding.
 pub const PLANES: usize = 5;
 
 /// `LUT[v] = v / 255` exactly as a division rounds (not a multiplication by 1/255).

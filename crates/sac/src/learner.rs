@@ -168,7 +168,7 @@ impl Learner {
         self.replay.len() >= self.cfg.training_starts.max(1)
     }
 
-    /// Actions for `frames` with a centre crop (acting and evaluation, PAPER_SPEC §1.1).
+    /// Actions for `frames` with a centre crop (acting and evaluation, docs/paper.md §1.1).
     pub fn act(&mut self, frames: &[&Frame], mode: ActMode) -> Result<Vec<[f32; 5]>, LearnerError> {
         act_on(&mut self.agent, frames, self.cfg.agent.input_size, mode)
     }

@@ -1,4 +1,4 @@
-//! equiarm_sac: SAC from demonstrations as in Wang et al. (ICLR 2023), PAPER_SPEC §2, with no ROS in it.
+//! equiarm_sac: SAC from demonstrations as in Wang et al. (ICLR 2023), docs/paper.md §2, with no ROS in it.
 //!
 //! - [`agent`]: the SAC agent (critic → actor → α → target), Equi / CNN / SEN networks by name.
 //! - [`replay`], [`frame`], [`augment`]: prioritised replay with expert retention over compact

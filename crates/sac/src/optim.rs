@@ -39,7 +39,7 @@ pub enum OptimError {
 /// Adam hyper-parameters (PyTorch defaults except the learning rate).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AdamParams {
-    /// Learning rate (PAPER_SPEC §2: 1e-3).
+    /// Learning rate (docs/paper.md §2: 1e-3).
     pub lr: f64,
     /// First-moment decay.
     pub beta1: f64,
@@ -275,7 +275,7 @@ pub fn parameters<M: Module>(module: &M) -> BTreeMap<String, Tensor<1>> {
 }
 
 /// Polyak averaging `target ← (1 − τ)·target + τ·online` for every parameter path the two share
-/// (PAPER_SPEC §2: τ = 0.01 after every update). `target` lives on the plain device.
+/// (docs/paper.md §2: τ = 0.01 after every update). `target` lives on the plain device.
 pub fn polyak<M: Module>(target: M, online: &M, tau: f64) -> M {
     struct Mix {
         path: Vec<String>,

@@ -1,17 +1,17 @@
 //! Prioritised experience replay with expert retention, as the authors' `PrioritizedQLearningBuffer`
-//! over `QLearningBufferExpert` (PAPER_SPEC §2): proportional PER with a sum tree and a min tree over
+//! over `QLearningBufferExpert` (docs/paper.md §2): proportional PER with a sum tree and a min tree over
 //! the slots (OpenAI baselines' scheme: stratified sampling, p^α in the trees, max-priority insertion,
 //! importance weights normalised by the largest weight), a ring buffer whose write pointer skips
 //! expert slots so demonstrations are never evicted, and checkpoint persistence.
 //!
 //! Frames are shared by [`Arc`]: transition t's `next_obs` is transition t+1's `obs`, so a frame is
-//! stored once and freed when no transition refers to it (ARCHITECTURE §6).
+//! stored once and freed when no transition refers to it (docs/architecture.md#memory-budget).
 //!
 //! ## Limitations
 //!
 //! - Single-threaded; the learner owns the buffer (wrap it in a lock to share it).
 //! - The importance weights are computed as baselines does; the paper's training does not use them
-//!   (PAPER_SPEC §7.5), so using them is the caller's choice.
+//!   (docs/paper.md §7.5), so using them is the caller's choice.
 //! - The checkpoint format ([`Replay::save`]) is this crate's own (versioned, little-endian, zstd);
 //!   it is not the authors' pickle. Capacity is limited to [`MAX_CAPACITY`] slots.
 
@@ -116,7 +116,7 @@ pub enum ReplayError {
     },
 }
 
-/// Replay buffer settings (PAPER_SPEC §2 defaults).
+/// Replay buffer settings (docs/paper.md §2 defaults).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ReplayConfig {
@@ -191,7 +191,7 @@ pub struct Stored {
     pub obs: Arc<Frame>,
     /// Observation at time t+1.
     pub next_obs: Arc<Frame>,
-    /// Normalised action in [-1, 1], order (p, dx, dy, dz, dθ) (PAPER_SPEC §1.2).
+    /// Normalised action in [-1, 1], order (p, dx, dy, dz, dθ) (docs/paper.md §1.2).
     pub action: [f32; 5],
     /// Reward received.
     pub reward: f32,

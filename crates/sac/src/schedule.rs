@@ -1,5 +1,5 @@
-//! Small schedule types in the style of DrQ-v2's `utils.py` (STYLE §4): [`Linear`] interpolation
-//! (PER β annealed 0.4 → 1.0 over training, PAPER_SPEC §2) and the [`Every`] predicate (evaluate
+//! Small schedule types in the style of DrQ-v2's `utils.py`: [`Linear`] interpolation
+//! (PER β annealed 0.4 → 1.0 over training, docs/paper.md §2) and the [`Every`] predicate (evaluate
 //! every 200 training steps).
 //!
 //! ## Limitations

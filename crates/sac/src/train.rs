@@ -1,6 +1,6 @@
 //! The transport-free training loop (`equiarm train --in-process`): N envs stepped in this
 //! process, expert demonstrations first (successful episodes only), one update per vectorised
-//! step (PAPER_SPEC §2: 1 update per N transitions), a greedy evaluation over fixed seeds every
+//! step (docs/paper.md §2: 1 update per N transitions), a greedy evaluation over fixed seeds every
 //! `eval_every` updates, CleanRL-named metrics, a learning-curve PNG and checkpoints with exact
 //! resume.
 //!

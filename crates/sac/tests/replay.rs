@@ -1,4 +1,4 @@
-//! Behaviour of the prioritised expert replay (PAPER_SPEC §2) through its public API: sampling
+//! Behaviour of the prioritised expert replay (docs/paper.md §2) through its public API: sampling
 //! frequencies (χ² goodness of fit), priority arithmetic, expert retention, importance weights, frame
 //! sharing, and checkpoint round trips and failures.
 

@@ -1,4 +1,4 @@
-//! The camera model (PAPER_SPEC §3.4): a pinhole camera looking at the workspace centre from an
+//! The camera model (docs/paper.md §3.4): a pinhole camera looking at the workspace centre from an
 //! elevation angle, oriented so that **image rows increase toward world +x and columns toward +y**
 //! (BulletArm's up vector (−1, 0, 0)). Depth is planar (along the optical axis) in metres.
 //!

@@ -1,4 +1,4 @@
-//! Image-space symmetry corruptions (PAPER_SPEC §5.2, §5.3): reflections and the single-camera
+//! Image-space symmetry corruptions (docs/paper.md §5.2, §5.3): reflections and the single-camera
 //! orthographic occlusion projection. Pure functions over the renderer's buffers.
 //!
 //! Limitations: the occlusion projection uses the env camera's resolution for both the point cloud and

@@ -6,7 +6,7 @@
 //! (same build, same machine). Each reset builds a fresh rapier world; all randomness comes from the
 //! seed; parallel stepping runs each env on one thread, so the thread count does not matter.
 //!
-//! Symmetry corruptions ([`Corruption`], PAPER_SPEC §5): random reflection of every observation, the
+//! Symmetry corruptions ([`Corruption`], docs/paper.md §5): random reflection of every observation, the
 //! single-camera orthographic occlusion projection, and the gripper-only scene (no checker floor).
 
 use std::sync::Arc;

@@ -1,8 +1,8 @@
 //! The floating parallel-jaw gripper: a kinematic palm (position-driven each physics step) carrying two
-//! dynamic fingers on prismatic impulse joints with position motors (SIM_NOTES §2). The controlled
+//! dynamic fingers on prismatic impulse joints with position motors. The controlled
 //! point is the fingertip centre (TCP), 0.055 m below the palm centre; its yaw is about world z.
 //!
-//! Action semantics (PAPER_SPEC §3.2): the delta is clipped to ±0.05 m / ±π/4, the target TCP is
+//! Action semantics (docs/paper.md §3.2): the delta is clipped to ±0.05 m / ±π/4, the target TCP is
 //! clamped to the workspace box, yaw is neither clipped nor wrapped, and the palm moves linearly over
 //! the substeps; then the finger motors get the new open ratio (and, if it changed, a few more
 //! substeps to close or open), as BulletArm moves the arm before it drives the gripper. Holding (§3.2 item 4): an object counts as held when both fingers touch it with
@@ -22,14 +22,14 @@ use crate::world::Scene;
 
 /// TCP (fingertip centre) below the palm centre, m.
 pub const TCP_BELOW_PALM: f32 = 0.055;
-/// Workspace box of the TCP (PAPER_SPEC §3.1): x, y, z ranges in metres.
+/// Workspace box of the TCP (docs/paper.md §3.1): x, y, z ranges in metres.
 pub const WORKSPACE: [[f32; 2]; 3] = [[0.25, 0.65], [-0.2, 0.2], [0.01, 0.25]];
 /// Largest position delta per step, m.
 pub const MAX_DPOS: f32 = 0.05;
 /// Largest yaw delta per step, rad.
 pub const MAX_DROT: f32 = std::f32::consts::FRAC_PI_4;
 
-/// A gripper command in physical units (PAPER_SPEC §1.2): target open ratio in [0, 1]
+/// A gripper command in physical units (docs/paper.md §1.2): target open ratio in [0, 1]
 /// (0 closed, 1 open), TCP position deltas in metres, yaw delta in radians.
 #[derive(Clone, Copy, Debug, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Action {
@@ -66,7 +66,7 @@ impl Action {
     }
 
     /// The agent's normalised action u ∈ [-1, 1]^5 (order p, x, y, z, θ) of this physical action,
-    /// after clipping (PAPER_SPEC §1.2).
+    /// after clipping (docs/paper.md §1.2).
     pub fn to_normalized(self) -> [f32; 5] {
         let a = self.clipped();
         [a.open_ratio * 2.0 - 1.0, a.dx / MAX_DPOS, a.dy / MAX_DPOS, a.dz / MAX_DPOS, a.dtheta / MAX_DROT]
@@ -227,7 +227,7 @@ impl Gripper {
     ///
     /// The palm is kinematic (unlimited force): without this it would press a block it lands on
     /// into the table until the solver ejects the block sideways, out of the workspace, at
-    /// 1–2 m/s. BulletArm's arm is position-controlled with limited force (PAPER_SPEC §3.2): its
+    /// 1–2 m/s. BulletArm's arm is position-controlled with limited force (docs/paper.md §3.2): its
     /// IK stalls on top of the object instead. Side contacts (a finger against a block it sweeps)
     /// do not stop the descent; only surfaces facing up (outward normal z > 0.7) do.
     fn descent_room(&self, scene: &Scene, depth: f32, held: &[RigidBodyHandle]) -> f32 {

@@ -1,7 +1,7 @@
 //! # equiarm_sim
 //!
 //! The simulator of equiarm: BulletArm's five close-loop manipulation tasks (Wang et al., ICLR 2023,
-//! PAPER_SPEC §3) in rapier, seen by an oblique RGBD camera, with expert planners. No ROS here: a node
+//! docs/paper.md §3) in rapier, seen by an oblique RGBD camera, with expert planners. No ROS here: a node
 //! maps [`Env`] calls to messages.
 //!
 //! ```no_run

@@ -44,7 +44,7 @@ impl Frame {
 }
 
 impl Frame {
-    /// The `size`×`size` window whose top-left pixel is (row0, col0) (PAPER_SPEC §1.1: random crops
+    /// The `size`×`size` window whose top-left pixel is (row0, col0) (docs/paper.md §1.1: random crops
     /// of 128 from 152 in training, the centre crop (12, 12) when acting). `None` if it does not fit.
     pub fn crop(&self, row0: usize, col0: usize, size: usize) -> Option<Frame> {
         if row0 + size > self.height || col0 + size > self.width {

@@ -1,4 +1,4 @@
-//! The five close-loop tasks of PAPER_SPEC §3.3 (scene, spawn randomisation, success and validity
+//! The five close-loop tasks of docs/paper.md §3.3 (scene, spawn randomisation, success and validity
 //! tests) and their expert planners (§3.5).
 //!
 //! Planners are closed loop: every step they re-read the privileged state and aim at the current
@@ -61,7 +61,7 @@ impl TaskKind {
     }
 }
 
-/// Gripper reset pose (PAPER_SPEC §3.1): TCP (0.45, 0, 0.20), yaw 0, fully open.
+/// Gripper reset pose (docs/paper.md §3.1): TCP (0.45, 0, 0.20), yaw 0, fully open.
 pub const RESET_TCP: [f32; 3] = [0.45, 0.0, 0.20];
 const CUBE_HALF: f32 = 0.025;
 const BLOCK_HALF_HEIGHT: f32 = 0.025;

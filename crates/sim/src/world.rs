@@ -1,8 +1,8 @@
 //! The rapier world: every physics setting in one place ([`SimParams`]), the table, and the insertion
 //! of URDF assets with the per-collider colour and segmentation id the renderers need.
 //!
-//! A fresh [`Scene`] is built on every reset (SIM_NOTES §4: handles, warm-start caches and the BVH
-//! carry history, so reusing a world would make episodes depend on the past).
+//! A fresh [`Scene`] is built on every reset (rapier's handles, warm-start caches and
+//! BVH carry history, so reusing a world would make episodes depend on the past).
 //!
 //! Limitations: kinematic-vs-fixed contacts are off (rapier's default), so the kinematic palm passes
 //! through the table; the gripper clamps its height so only the dynamic fingers meet the table.
@@ -13,7 +13,7 @@ use rapier3d_urdf::{UrdfLoaderOptions, UrdfRobot, UrdfRobotHandles};
 use crate::assets::{Asset, AssetKind, Assets};
 use crate::error::{Result, SimError};
 
-/// Physics settings. Defaults follow SIM_NOTES "Recommended settings".
+/// Physics settings (defaults in `SimParams::default`; the load-bearing ones say why on their field).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SimParams {
@@ -21,7 +21,7 @@ pub struct SimParams {
     pub dt: f32,
     /// Physics steps per env step (the palm is interpolated over them).
     ///
-    /// NOTE: 20 × 1/120 s = 0.167 s per step, so a full 5 cm step moves at 0.3 m/s. SIM_NOTES' 12
+    /// NOTE: 20 × 1/120 s = 0.167 s per step, so a full 5 cm step moves at 0.3 m/s. 12
     /// substeps (0.5 m/s) gave the pulling expert 91/100: the swept block hit the other one hard
     /// enough to bounce off or knock it out of the workspace; 20 gives 99/100. BulletArm's own step
     /// is quasi-static (it waits for the arm to converge), so slower is also closer to the paper.
@@ -39,7 +39,7 @@ pub struct SimParams {
     pub prediction_distance: f32,
     /// NOTE: contact softness is load-bearing. rapier's default (30 Hz, ζ = 10) lets motor-driven
     /// fingers sink 1-1.3 cm into a light cube and misaligned grasps fail; 240 Hz, ζ = 1 keeps the
-    /// penetration near 0.5 mm (SIM_NOTES pitfall 1).
+    /// penetration near 0.5 mm.
     pub contact_softness_hz: f32,
     pub contact_damping_ratio: f32,
     /// Gravity magnitude (along -z), m/s². BulletArm uses 10.

@@ -129,8 +129,8 @@ fn expert_planners_succeed_in_19_of_20_episodes() {
     }
 }
 
-/// SIM_NOTES recommends 1/120 s steps and keeping a 240 Hz regression test: the experts must not
-/// depend on the coarse step.
+/// The sim steps at 1/120 s; a run at 240 Hz guards that the experts do not depend on the coarse
+/// step.
 #[test]
 fn experts_also_succeed_at_240_hz() {
     for task in [TaskKind::BlockPicking, TaskKind::BlockPushing, TaskKind::BlockInBowl] {

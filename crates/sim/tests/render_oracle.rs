@@ -1,7 +1,7 @@
 //! Rendering contracts: the rasteriser agrees with the rapier ray-cast oracle on a reset scene of every
 //! task (≥ 99.9 % equal segmentation, depth within 1e-5 m where they agree), and the camera's image
 //! layout is the paper's: a world yaw of +90° about the workspace centre seen from a top-down camera is
-//! `rot90(k=1)` of the image (PAPER_SPEC §1.3).
+//! `rot90(k=1)` of the image (docs/paper.md §1.3).
 
 use equiarm_sim::render::{Frame, MeshCache, agreement, rasterize, raycast};
 use equiarm_sim::rng::Rng;
