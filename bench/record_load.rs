@@ -8,6 +8,7 @@
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use clap::Parser;
 use equiarm_bag::{ReadMode, Reader};
 use equiarm_msgs::msg::Observation;
 use equiarm_msgs::sensor_msgs::Image;
@@ -22,11 +23,27 @@ fn vm(pid: u32, key: &str) -> f64 {
         / 1024.0
 }
 
+/// The recorder under N simulated envs publishing RGBD observations at R Hz for S seconds.
+#[derive(Parser, Debug)]
+#[command(name = "record_load")]
+struct Args {
+    /// Simulated env nodes.
+    #[arg(default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
+    envs: u64,
+    /// Observations per second per env.
+    #[arg(default_value_t = 50.0)]
+    hz: f64,
+    /// Seconds of publishing.
+    #[arg(default_value_t = 10.0)]
+    secs: f64,
+    /// Passed by `cargo bench` to every bench program; ignored.
+    #[arg(long, hide = true)]
+    bench: bool,
+}
+
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with("--")).collect();
-    let envs: usize = args.first().and_then(|a| a.parse().ok()).unwrap_or(10);
-    let hz: f64 = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(50.0);
-    let secs: f64 = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(10.0);
+    let args = Args::parse();
+    let (envs, hz, secs) = (args.envs as usize, args.hz, args.secs);
     let domain = 90;
     let dir = std::env::temp_dir().join(format!("equiarm_record_load_{}", std::process::id()));
     let bag = dir.join("load");

@@ -21,6 +21,7 @@
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use clap::Parser;
 use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, Transition};
 use equiarm_msgs::sensor_msgs::Image;
 use equiarm_nodes::ros::{RosNode, RosOptions, qos};
@@ -31,14 +32,28 @@ fn vm_kib(pid: u32, key: &str) -> Option<u64> {
     line.split_whitespace().nth(1)?.parse().ok()
 }
 
+/// Throughput and peak memory of the `equiarm sim` node, driven over DDS by an in-process expert.
+#[derive(Parser, Debug)]
+#[command(name = "sim_node_bench")]
+struct Args {
+    /// Steps to drive.
+    #[arg(default_value_t = 500)]
+    steps: u64,
+    /// The sim node's task.
+    #[arg(default_value = "block_picking")]
+    task: String,
+    /// Also subscribe to the camera topics (the node copies images only while someone does).
+    #[arg(long)]
+    camera: bool,
+    /// Milliseconds the driver thinks per step (a policy's inference time).
+    #[arg(long, value_name = "D", default_value_t = 0)]
+    delay_ms: u64,
+}
+
 fn main() -> anyhow::Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let camera = args.iter().any(|a| a == "--camera");
-    let delay_ms: u64 =
-        args.iter().find_map(|a| a.strip_prefix("--delay-ms=")).map(|s| s.parse()).transpose()?.unwrap_or(0);
-    let pos: Vec<&String> = args.iter().filter(|a| !a.starts_with("--")).collect();
-    let steps: u64 = pos.first().map(|s| s.parse()).transpose()?.unwrap_or(500);
-    let task = pos.get(1).map(|s| s.as_str()).unwrap_or("block_picking");
+    let args = Args::parse();
+    let (camera, delay_ms, steps) = (args.camera, args.delay_ms, args.steps);
+    let task = args.task.as_str();
     let exe = std::env::current_exe()?;
     let bin = exe.parent().and_then(|p| p.parent()).map(|p| p.join("equiarm")).filter(|p| p.exists());
     let bin = bin.ok_or_else(|| anyhow::anyhow!("build the equiarm binary first (cargo build --bin equiarm)"))?;

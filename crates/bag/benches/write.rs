@@ -7,6 +7,7 @@
 use std::hint::black_box;
 use std::time::Instant;
 
+use clap::Parser;
 use equiarm_bag::qos::OfferedQos;
 use equiarm_bag::{Compression, TopicInfo, Writer, WriterOptions};
 use equiarm_msgs::msg::Observation;
@@ -58,10 +59,24 @@ fn peak_rss_mb() -> f64 {
         / 1024.0
 }
 
+/// Bag write throughput on simulator frames: uncompressed, lz4 and zstd.
+#[derive(Parser, Debug)]
+#[command(name = "write")]
+struct Args {
+    /// Observations written per bag.
+    #[arg(default_value_t = 600)]
+    frames: u32,
+    /// Bags written per compression; the median rate is reported.
+    #[arg(default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..))]
+    rounds: u32,
+    /// Passed by `cargo bench` to every bench program; ignored.
+    #[arg(long, hide = true)]
+    bench: bool,
+}
+
 fn main() {
-    let args: Vec<String> = std::env::args().filter(|a| !a.starts_with("--")).collect();
-    let frames: u32 = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(600);
-    let rounds: usize = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(5);
+    let args = Args::parse();
+    let (frames, rounds) = (args.frames, args.rounds);
     let pool: Vec<Vec<u8>> = sim_frames(64).iter().map(|o| cdr::encode(o).unwrap()).collect();
     let per = pool[0].len();
     let dir = std::env::temp_dir().join(format!("equiarm_bag_bench_{}", std::process::id()));

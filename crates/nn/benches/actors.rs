@@ -13,6 +13,7 @@
 //! Threads: flex uses rayon's pool (set `RAYON_NUM_THREADS`); the peer gets `--threads`
 //! (default 2). Prints a table and one CSV line per case (prefixed `csv,`).
 
+use clap::{Parser, ValueEnum};
 use equiarm_nn::burn::module::Module;
 use equiarm_nn::burn::optim::{AdamConfig, GradientsParams};
 use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
@@ -21,6 +22,7 @@ use equiarm_nn::nets::{Actor, CnnActor, EquiActor, NetConfig};
 use std::process::Command;
 use std::time::Instant;
 
+/// What the run measures, from the command line.
 struct Args {
     reps: usize,
     configs: Vec<&'static str>,
@@ -31,55 +33,81 @@ struct Args {
     threads: usize,
 }
 
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum ConfigArg {
+    Reduced,
+    Paper,
+    All,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum NetArg {
+    Equi,
+    Cnn,
+    All,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum ModeArg {
+    #[value(name = "fwd_b1")]
+    FwdB1,
+    #[value(name = "fwd_b128")]
+    FwdB128,
+    #[value(name = "train_b128")]
+    TrainB128,
+    All,
+}
+
+/// The Equi and CNN SAC actors on burn, beside PyTorch + e2cnn.
+#[derive(Parser, Debug)]
+#[command(name = "actors")]
+struct Cli {
+    /// Timed runs per case after one warm-up (5× as many, at least 10, at batch 1); the median is
+    /// reported.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..))]
+    reps: u32,
+    /// Which network configuration (`reduced`: hidden 16, 64 px; `paper`: hidden 64, 128 px).
+    #[arg(long, value_enum, default_value_t = ConfigArg::All)]
+    config: ConfigArg,
+    /// Which actor.
+    #[arg(long, value_enum, default_value_t = NetArg::All)]
+    net: NetArg,
+    /// Which case: forward at batch 1, forward at batch 128, forward + backward + Adam at batch 128.
+    #[arg(long, value_enum, default_value_t = ModeArg::All)]
+    mode: ModeArg,
+    /// Skip the PyTorch + e2cnn peer.
+    #[arg(long)]
+    no_peer: bool,
+    /// Python interpreter that runs the peer (`bench/e2cnn_peer.py`).
+    #[arg(long, default_value = "python3")]
+    python: String,
+    /// Threads of the peer (ours: set `RAYON_NUM_THREADS`).
+    #[arg(long, default_value_t = 2)]
+    threads: usize,
+    /// Passed by `cargo bench` to every bench program; ignored.
+    #[arg(long, hide = true)]
+    bench: bool,
+}
+
 fn parse() -> Args {
-    let mut a = Args {
-        reps: 3,
-        configs: vec!["reduced", "paper"],
-        nets: vec!["equi", "cnn"],
-        modes: vec!["fwd_b1", "fwd_b128", "train_b128"],
-        peer: true,
-        python: "python3".into(),
-        threads: 2,
+    let cli = Cli::parse();
+    let configs = match cli.config {
+        ConfigArg::Reduced => vec!["reduced"],
+        ConfigArg::Paper => vec!["paper"],
+        ConfigArg::All => vec!["reduced", "paper"],
     };
-    let argv: Vec<String> = std::env::args().skip(1).collect();
-    let mut i = 0;
-    let pick = |v: &str, all: &[&'static str]| -> Vec<&'static str> {
-        if v == "all" { all.to_vec() } else { all.iter().copied().filter(|x| *x == v).collect() }
+    let nets = match cli.net {
+        NetArg::Equi => vec!["equi"],
+        NetArg::Cnn => vec!["cnn"],
+        NetArg::All => vec!["equi", "cnn"],
     };
-    while i < argv.len() {
-        let val = argv.get(i + 1).cloned().unwrap_or_default();
-        match argv[i].as_str() {
-            "--reps" => {
-                a.reps = val.parse().expect("--reps N");
-                i += 1;
-            }
-            "--config" => {
-                a.configs = pick(&val, &["reduced", "paper"]);
-                i += 1;
-            }
-            "--net" => {
-                a.nets = pick(&val, &["equi", "cnn"]);
-                i += 1;
-            }
-            "--mode" => {
-                a.modes = pick(&val, &["fwd_b1", "fwd_b128", "train_b128"]);
-                i += 1;
-            }
-            "--threads" => {
-                a.threads = val.parse().expect("--threads N");
-                i += 1;
-            }
-            "--python" => {
-                a.python = val;
-                i += 1;
-            }
-            "--no-peer" => a.peer = false,
-            "--bench" => {}
-            other => panic!("unknown argument {other}"),
-        }
-        i += 1;
-    }
-    a
+    let modes = match cli.mode {
+        ModeArg::FwdB1 => vec!["fwd_b1"],
+        ModeArg::FwdB128 => vec!["fwd_b128"],
+        ModeArg::TrainB128 => vec!["train_b128"],
+        ModeArg::All => vec!["fwd_b1", "fwd_b128", "train_b128"],
+    };
+    Args { reps: cli.reps as usize, configs, nets, modes, peer: !cli.no_peer, python: cli.python, threads: cli.threads }
 }
 
 fn config(name: &str) -> NetConfig {

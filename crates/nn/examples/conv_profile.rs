@@ -2,6 +2,7 @@
 //! (conv_transpose2d), weight gradient, and max-pool backward for the layer shapes of the Equi
 //! actor, at batch 128. `cargo run -p equiarm_nn --release --example conv_profile -- [paper|reduced]`
 
+use clap::{Parser, ValueEnum};
 use equiarm_nn::burn::tensor::module::{conv_transpose2d, conv2d, conv2d_weight_backward};
 use equiarm_nn::burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
@@ -26,8 +27,25 @@ fn rand<const D: usize>(shape: [usize; D], dev: &Device) -> Tensor<D> {
     Tensor::from_data(TensorData::new(Init::new(0).normal("p", n, 1.0), shape), dev)
 }
 
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum Config {
+    /// Hidden 64, 128 px.
+    Paper,
+    /// Hidden 16, 64 px.
+    Reduced,
+}
+
+/// Times the convolutions of a training step of the Equi actor at batch 128.
+#[derive(Parser, Debug)]
+#[command(name = "conv_profile")]
+struct Args {
+    /// The network configuration whose layer shapes are timed.
+    #[arg(value_enum, default_value_t = Config::Reduced)]
+    config: Config,
+}
+
 fn main() {
-    let paper = std::env::args().nth(1).as_deref() == Some("paper");
+    let paper = Args::parse().config == Config::Paper;
     let (n, s0) = if paper { (64, 128) } else { (16, 64) };
     let b = 128;
     let dev = Device::flex();

@@ -10,23 +10,54 @@
 //! preset (default the paper's oblique `side`), `EVAL_EVERY=U` also runs the greedy
 //! policy on the config's evaluation episodes in the simulator every U updates (the success rate
 //! a policy fitted to the demos alone reaches).
+use clap::Parser;
+use equiarm_sac::agent::ModelKind;
 use equiarm_sac::config::TrainConfig;
 use equiarm_sac::learner::Learner;
 
+/// SAC updates on the expert demos alone: how well the actor imitates them.
+#[derive(Parser, Debug)]
+#[command(name = "bc_check")]
+struct Args {
+    /// Weight of the actor's expert (behaviour-cloning) loss, `agent.expert_weight` (the preset's is 1).
+    #[arg(default_value_t = 1.0)]
+    weight: f64,
+    /// SAC updates to run.
+    #[arg(default_value_t = 200)]
+    updates: u64,
+    /// Frame size and network input size, `FRAME:INPUT` (default the reduced preset's).
+    #[arg(value_name = "FRAME:INPUT", value_parser = parse_sizes)]
+    sizes: Option<(usize, usize)>,
+    /// Hidden size (default the reduced preset's).
+    hidden: Option<usize>,
+    /// Network family: equi, cnn or sen (default the reduced preset's).
+    #[arg(value_parser = parse_model)]
+    model: Option<ModelKind>,
+}
+
+fn parse_sizes(s: &str) -> Result<(usize, usize), String> {
+    let bad = || format!("expected FRAME:INPUT (two pixel sizes, e.g. 38:32), got `{s}`");
+    let (f, i) = s.split_once(':').ok_or_else(bad)?;
+    Ok((f.parse().map_err(|_| bad())?, i.parse().map_err(|_| bad())?))
+}
+
+fn parse_model(s: &str) -> Result<ModelKind, String> {
+    ModelKind::parse(s).ok_or_else(|| format!("unknown model `{s}` (equi, cnn or sen)"))
+}
+
 fn main() {
-    let a: Vec<String> = std::env::args().skip(1).collect();
-    let w: f64 = a.first().and_then(|s| s.parse().ok()).unwrap_or(1.0);
-    let n: u64 = a.get(1).and_then(|s| s.parse().ok()).unwrap_or(200);
+    let args = Args::parse();
+    let (w, n) = (args.weight, args.updates);
     let mut cfg = TrainConfig::reduced("block_pulling");
-    if let Some((f, i)) = a.get(2).and_then(|s| s.split_once(':')) {
-        cfg.image_size = f.parse().unwrap();
-        cfg.agent.input_size = i.parse().unwrap();
+    if let Some((f, i)) = args.sizes {
+        cfg.image_size = f;
+        cfg.agent.input_size = i;
     }
-    if let Some(h) = a.get(3) {
-        cfg.agent.hidden = h.parse().unwrap();
+    if let Some(h) = args.hidden {
+        cfg.agent.hidden = h;
     }
-    if let Some(m) = a.get(4) {
-        cfg.agent.model = equiarm_sac::agent::ModelKind::parse(m).unwrap();
+    if let Some(m) = args.model {
+        cfg.agent.model = m;
     }
     cfg.agent.expert_weight = w;
     if let Some(k) = std::env::var("DEMOS").ok().and_then(|v| v.parse().ok()) {

@@ -7,38 +7,71 @@
 //! Each RUN_DIR is a training run directory with `evals.json` (written by `equiarm train`).
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
+use clap::{Parser, ValueEnum};
 use equiarm_sac::plot::{Chart, Series, palette, write_png};
 use equiarm_sac::train::EvalResult;
 
-fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    if args.is_empty() {
-        eprintln!("usage: compare_runs OUT.png [--metric success_rate|discounted_return] LABEL=RUN[,RUN...] ...");
-        std::process::exit(2);
-    }
-    let out = Path::new(&args[0]);
-    let mut metric = "success_rate".to_string();
-    let mut groups: Vec<(String, Vec<String>)> = Vec::new();
-    let mut i = 1;
-    while i < args.len() {
-        if args[i] == "--metric" {
-            metric = args.get(i + 1).cloned().unwrap_or_default();
-            i += 2;
-            continue;
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+#[value(rename_all = "snake_case")]
+enum Metric {
+    SuccessRate,
+    DiscountedReturn,
+}
+
+impl Metric {
+    fn name(self) -> &'static str {
+        match self {
+            Metric::SuccessRate => "success_rate",
+            Metric::DiscountedReturn => "discounted_return",
         }
-        let Some((label, dirs)) = args[i].split_once('=') else {
-            eprintln!("expected LABEL=RUN_DIR[,RUN_DIR...], got `{}`", args[i]);
-            std::process::exit(2);
-        };
-        groups.push((label.to_string(), dirs.split(',').map(String::from).collect()));
-        i += 1;
     }
-    let pick = |e: &EvalResult| if metric == "discounted_return" { e.discounted_return } else { e.success_rate };
+
+    fn pick(self, e: &EvalResult) -> f64 {
+        match self {
+            Metric::SuccessRate => e.success_rate,
+            Metric::DiscountedReturn => e.discounted_return,
+        }
+    }
+}
+
+/// A `LABEL=RUN_DIR[,RUN_DIR...]` argument.
+#[derive(Clone, Debug)]
+struct Group {
+    label: String,
+    dirs: Vec<PathBuf>,
+}
+
+fn parse_group(s: &str) -> Result<Group, String> {
+    let (label, dirs) = s.split_once('=').ok_or_else(|| format!("expected LABEL=RUN_DIR[,RUN_DIR...], got `{s}`"))?;
+    if label.is_empty() || dirs.is_empty() {
+        return Err(format!("expected LABEL=RUN_DIR[,RUN_DIR...], got `{s}`"));
+    }
+    Ok(Group { label: label.to_string(), dirs: dirs.split(',').map(PathBuf::from).collect() })
+}
+
+/// Evaluation curves of several runs, mean ± standard error per group, in one PNG.
+#[derive(Parser, Debug)]
+#[command(name = "compare_runs")]
+struct Args {
+    /// The PNG to write.
+    out: PathBuf,
+    /// The evaluation value plotted and tabulated.
+    #[arg(long, value_enum, default_value_t = Metric::SuccessRate)]
+    metric: Metric,
+    /// Run directories (with `evals.json`) grouped under a legend label.
+    #[arg(value_name = "LABEL=RUN_DIR[,RUN_DIR...]", required = true, value_parser = parse_group)]
+    groups: Vec<Group>,
+}
+
+fn main() {
+    let args = Args::parse();
+    let metric = args.metric.name();
     let mut series = Vec::new();
-    println!("{:<12} {:>5} {:>9} {:>14} {:>10}", "label", "runs", "updates", &metric, "stderr");
-    for (gi, (label, dirs)) in groups.iter().enumerate() {
+    let lw = args.groups.iter().map(|g| g.label.chars().count()).max().unwrap_or(0).max(12);
+    println!("{:<lw$} {:>5} {:>9} {:>14} {:>10}", "label", "runs", "updates", metric, "stderr");
+    for (gi, Group { label, dirs }) in args.groups.iter().enumerate() {
         let mut by_step: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
         for d in dirs {
             let path = Path::new(d).join("evals.json");
@@ -46,7 +79,7 @@ fn main() {
             let evals: Vec<EvalResult> =
                 serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
             for e in &evals {
-                by_step.entry(e.updates).or_default().push(pick(e));
+                by_step.entry(e.updates).or_default().push(args.metric.pick(e));
             }
         }
         let full: Vec<(u64, Vec<f64>)> = by_step.into_iter().filter(|(_, v)| v.len() == dirs.len()).collect();
@@ -61,22 +94,22 @@ fn main() {
             })
             .collect();
         if let Some(&(u, m, se)) = stats.last() {
-            println!("{label:<12} {:>5} {:>9} {:>14.3} {:>10.3}", dirs.len(), u, m, se);
+            println!("{label:<lw$} {:>5} {:>9} {:>14.3} {:>10.3}", dirs.len(), u, m, se);
         }
         series.push(Series {
-            label: format!("{label} ({} seeds)", dirs.len()),
+            label: format!("{label} ({} seed{})", dirs.len(), if dirs.len() == 1 { "" } else { "s" }),
             color: palette(gi),
             points: stats.iter().map(|s| (s.0, s.1)).collect(),
             band: Some(stats.iter().map(|s| s.2).collect()),
         });
     }
     let chart = Chart {
-        title: format!("greedy evaluation {metric} (mean +/- standard error over seeds)"),
+        title: format!("greedy evaluation {metric} (mean ± standard error over seeds)"),
         x_label: "gradient updates".into(),
-        y_label: metric.clone(),
+        y_label: metric.to_string(),
         y_range: Some((0.0, 1.0)),
         ..Chart::default()
     };
-    write_png(out, &chart, &series).unwrap_or_else(|e| panic!("{e}"));
-    println!("wrote {}", out.display());
+    write_png(&args.out, &chart, &series).unwrap_or_else(|e| panic!("{e}"));
+    println!("wrote {}", args.out.display());
 }

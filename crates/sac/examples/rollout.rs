@@ -4,19 +4,27 @@
 //! each episode's end (success, invalid or timeout) and, last, the counts.
 //!
 //! `cargo run -p equiarm_sac --example rollout -- RUN_DIR [EPISODES]`
+use clap::Parser;
 use equiarm_sac::agent::ActMode;
 use equiarm_sac::config::TrainConfig;
 use equiarm_sac::learner::{Learner, read_json};
 use equiarm_sim::Action;
 
+/// Greedy rollouts of a run's newest checkpoint, step by step beside the expert.
+#[derive(Parser, Debug)]
+#[command(name = "rollout")]
+struct Args {
+    /// Training run directory (with `config.json` and `checkpoints/`).
+    run_dir: std::path::PathBuf,
+    /// Evaluation episodes to roll out.
+    #[arg(default_value_t = 3)]
+    episodes: u64,
+}
+
 fn main() {
-    let a: Vec<String> = std::env::args().skip(1).collect();
-    let Some(dir) = a.first().map(std::path::PathBuf::from) else {
-        eprintln!("usage: rollout RUN_DIR [EPISODES]");
-        std::process::exit(2);
-    };
-    if let Err(e) = run(&dir, a.get(1).and_then(|s| s.parse().ok()).unwrap_or(3)) {
-        eprintln!("rollout: {}: {e}", dir.display());
+    let args = Args::parse();
+    if let Err(e) = run(&args.run_dir, args.episodes) {
+        eprintln!("rollout: {}: {e}", args.run_dir.display());
         std::process::exit(1);
     }
 }

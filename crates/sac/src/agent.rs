@@ -948,4 +948,24 @@ mod tests {
         assert!(e.contains("actor.safetensors"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
     }
+
+    #[test]
+    fn damaged_optimiser_state_is_refused_naming_the_file() {
+        let dir = crate::scratch::Scratch::new("agent_optim");
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut a = Agent::new(tiny(ModelKind::Cnn), 1).unwrap();
+        a.update(batch(4, 8, 3)).unwrap();
+        a.save(&dir).unwrap();
+        // The saved moments are a safetensors file any reader takes: one `.m` and `.v` per parameter.
+        let state = crate::tensorfile::read(&dir.join("critic_optim.safetensors")).unwrap();
+        assert_eq!(state.meta.get("step").map(String::as_str), Some("1"));
+        assert!(!state.tensors.is_empty() && state.tensors.len().is_multiple_of(2));
+        assert!(state.tensors.iter().all(|(n, _, _)| n.ends_with(".m") || n.ends_with(".v")));
+        // Cut short: the load fails, saying which file and why.
+        let path = dir.join("critic_optim.safetensors");
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+        let e = Agent::new(tiny(ModelKind::Cnn), 1).unwrap().load(&dir).unwrap_err().to_string();
+        assert!(e.contains("critic_optim.safetensors") && e.contains("not a safetensors file"), "{e}");
+    }
 }

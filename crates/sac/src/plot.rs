@@ -1,21 +1,30 @@
-//! Learning-curve PNGs drawn pixel by pixel, without a plotting library: a white canvas, axes with
-//! "nice" ticks (1, 2 or 5 × 10^k), a light grid, one antialiased polyline with point markers per
-//! [`Series`], optional translucent bands (e.g. ± standard error over seeds), a legend to the right
-//! of the plot, a title and axis labels. Text uses an embedded 5×7 bitmap font (printable ASCII
-//! 32–126, with short descenders for g, p, q and y; the title is drawn at twice the size).
+//! Learning-curve PNGs drawn with [`plotters`]: a white canvas, axes with "nice" ticks (1, 2 or
+//! 5 × 10^k, [`nice_ticks`]), a light grid, one polyline with point markers per [`Series`], optional
+//! translucent bands (e.g. mean ± standard error over seeds), a legend to the right of the plot, a
+//! title and axis labels.
+//!
+//! plotters' bitmap backend draws into an RGB buffer that the `image` crate encodes as PNG. Text is
+//! rasterised by plotters' `ab_glyph` font support with DejaVu Sans embedded from the `dejavu` crate
+//! (Bitstream Vera / DejaVu font licence), so no system font, fontconfig or freetype is needed.
 //!
 //! Limitations: one linear x axis and one linear y axis (no log scale); the x axis spans exactly
 //! the finite data (the y axis is widened to the enclosing ticks unless [`Chart::y_range`] fixes
-//! it); characters outside printable ASCII are drawn as `?`; labels that do not fit are clipped at
-//! the image border rather than wrapped; points with a non-finite coordinate are skipped and break
-//! the polyline (and band) there, like matplotlib; bands are filled column by column, so they expect
-//! the points of a series in increasing x order.
+//! it, and data outside a fixed range is clipped at the plot's edge); labels that do not fit are
+//! clipped at the image border rather than wrapped, and legend labels are cut at 40 characters;
+//! points with a non-finite coordinate are skipped and break the polyline (and band) there, like
+//! matplotlib; bands expect the points of a series in increasing x order.
 
 use std::fs::File;
 use std::io::BufWriter;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
-use image::{ImageFormat, Rgb, RgbImage};
+use image::{ImageFormat, RgbImage};
+use plotters::coord::ranged1d::{KeyPointHint, NoDefaultFormatting, ValueFormatter};
+use plotters::coord::types::RangedCoordf64;
+use plotters::prelude::*;
+use plotters::style::{FontStyle, register_font};
 
 /// What can go wrong while drawing or writing a chart.
 #[derive(Debug, thiserror::Error)]
@@ -44,6 +53,9 @@ pub enum PlotError {
         /// The underlying error.
         source: image::ImageError,
     },
+    /// plotters failed to lay out or draw the chart (e.g. the embedded font could not be loaded).
+    #[error("cannot draw the chart: {0}")]
+    Draw(String),
     /// `Chart::width` or `Chart::height` is outside 64..=16384 pixels.
     #[error("chart size {width}x{height} is outside 64..=16384 pixels per side")]
     BadSize {
@@ -96,7 +108,7 @@ impl Series {
 /// Chart-wide settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Chart {
-    /// Text above the plot (drawn at twice the font size).
+    /// Text above the plot (drawn larger than the other text).
     pub title: String,
     /// Text below the x axis.
     pub x_label: String,
@@ -217,328 +229,40 @@ fn format_tick(v: f64, step: f64) -> String {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Font: one line per printable ASCII character (32..=126): the character, then its 7 rows of
-// 5 pixels ('#' = ink). Parsed at compile time into one bit mask per row (bit 4 = leftmost).
-// The letters in DESCENDERS are drawn 2 rows lower, so that their last rows hang below the
-// baseline (a 'g' that does not look like a '9').
+// Styling.
 
-const GLYPH_W: i64 = 5;
-const GLYPH_H: i64 = 7;
-/// Horizontal advance per character at scale 1 (glyph plus one blank column).
-const ADVANCE: i64 = GLYPH_W + 1;
-
-const FONT_SRC: &str = r##"  ..... ..... ..... ..... ..... ..... .....
-! ..#.. ..#.. ..#.. ..#.. ..#.. ..... ..#..
-" .#.#. .#.#. ..... ..... ..... ..... .....
-# .#.#. .#.#. ##### .#.#. ##### .#.#. .#.#.
-$ ..#.. .#### #.#.. .###. ..#.# ####. ..#..
-% ##... ##..# ...#. ..#.. .#... #..## ...##
-& .##.. #..#. #.#.. .#... #.#.# #..#. .##.#
-' ..#.. ..#.. .#... ..... ..... ..... .....
-( ...#. ..#.. .#... .#... .#... ..#.. ...#.
-) .#... ..#.. ...#. ...#. ...#. ..#.. .#...
-* ..... ..#.. #.#.# .###. #.#.# ..#.. .....
-+ ..... ..#.. ..#.. ##### ..#.. ..#.. .....
-, ..... ..... ..... ..... .##.. ..#.. .#...
-- ..... ..... ..... ##### ..... ..... .....
-. ..... ..... ..... ..... ..... .##.. .##..
-/ ..... ....# ...#. ..#.. .#... #.... .....
-0 .###. #...# #..## #.#.# ##..# #...# .###.
-1 ..#.. .##.. ..#.. ..#.. ..#.. ..#.. .###.
-2 .###. #...# ....# ...#. ..#.. .#... #####
-3 ##### ...#. ..#.. ...#. ....# #...# .###.
-4 ...#. ..##. .#.#. #..#. ##### ...#. ...#.
-5 ##### #.... ####. ....# ....# #...# .###.
-6 ..##. .#... #.... ####. #...# #...# .###.
-7 ##### ....# ...#. ..#.. .#... .#... .#...
-8 .###. #...# #...# .###. #...# #...# .###.
-9 .###. #...# #...# .#### ....# ...#. .##..
-: ..... .##.. .##.. ..... .##.. .##.. .....
-; ..... .##.. .##.. ..... .##.. ..#.. .#...
-< ...#. ..#.. .#... #.... .#... ..#.. ...#.
-= ..... ..... ##### ..... ##### ..... .....
-> .#... ..#.. ...#. ....# ...#. ..#.. .#...
-? .###. #...# ....# ...#. ..#.. ..... ..#..
-@ .###. #...# ....# .##.# #.#.# #.#.# .###.
-A .###. #...# #...# ##### #...# #...# #...#
-B ####. #...# #...# ####. #...# #...# ####.
-C .###. #...# #.... #.... #.... #...# .###.
-D ###.. #..#. #...# #...# #...# #..#. ###..
-E ##### #.... #.... ####. #.... #.... #####
-F ##### #.... #.... ####. #.... #.... #....
-G .###. #...# #.... #.### #...# #...# .####
-H #...# #...# #...# ##### #...# #...# #...#
-I .###. ..#.. ..#.. ..#.. ..#.. ..#.. .###.
-J ..### ...#. ...#. ...#. ...#. #..#. .##..
-K #...# #..#. #.#.. ##... #.#.. #..#. #...#
-L #.... #.... #.... #.... #.... #.... #####
-M #...# ##.## #.#.# #.#.# #...# #...# #...#
-N #...# #...# ##..# #.#.# #..## #...# #...#
-O .###. #...# #...# #...# #...# #...# .###.
-P ####. #...# #...# ####. #.... #.... #....
-Q .###. #...# #...# #...# #.#.# #..#. .##.#
-R ####. #...# #...# ####. #.#.. #..#. #...#
-S .#### #.... #.... .###. ....# ....# ####.
-T ##### ..#.. ..#.. ..#.. ..#.. ..#.. ..#..
-U #...# #...# #...# #...# #...# #...# .###.
-V #...# #...# #...# #...# #...# .#.#. ..#..
-W #...# #...# #...# #.#.# #.#.# #.#.# .#.#.
-X #...# #...# .#.#. ..#.. .#.#. #...# #...#
-Y #...# #...# .#.#. ..#.. ..#.. ..#.. ..#..
-Z ##### ....# ...#. ..#.. .#... #.... #####
-[ .###. .#... .#... .#... .#... .#... .###.
-\ ..... #.... .#... ..#.. ...#. ....# .....
-] .###. ...#. ...#. ...#. ...#. ...#. .###.
-^ ..#.. .#.#. #...# ..... ..... ..... .....
-_ ..... ..... ..... ..... ..... ..... #####
-` .#... ..#.. ...#. ..... ..... ..... .....
-a ..... ..... .###. ....# .#### #...# .####
-b #.... #.... #.##. ##..# #...# #...# ####.
-c ..... ..... .###. #.... #.... #...# .###.
-d ....# ....# .##.# #..## #...# #...# .####
-e ..... ..... .###. #...# ##### #.... .###.
-f ..##. .#..# .#... ###.. .#... .#... .#...
-g .#### #...# #...# #...# .#### ....# .###.
-h #.... #.... #.##. ##..# #...# #...# #...#
-i ..#.. ..... .##.. ..#.. ..#.. ..#.. .###.
-j ...#. ..... ..##. ...#. ...#. #..#. .##..
-k #.... #.... #..#. #.#.. ##... #.#.. #..#.
-l .##.. ..#.. ..#.. ..#.. ..#.. ..#.. .###.
-m ..... ..... ##.#. #.#.# #.#.# #...# #...#
-n ..... ..... #.##. ##..# #...# #...# #...#
-o ..... ..... .###. #...# #...# #...# .###.
-p ####. #...# #...# #...# ####. #.... #....
-q .#### #...# #...# #...# .#### ....# ....#
-r ..... ..... #.##. ##..# #.... #.... #....
-s ..... ..... .###. #.... .###. ....# ####.
-t .#... .#... ###.. .#... .#... .#..# ..##.
-u ..... ..... #...# #...# #...# #..## .##.#
-v ..... ..... #...# #...# #...# .#.#. ..#..
-w ..... ..... #...# #...# #.#.# #.#.# .#.#.
-x ..... ..... #...# .#.#. ..#.. .#.#. #...#
-y #...# #...# #...# #...# .#### ....# .###.
-z ..... ..... ##### ...#. ..#.. .#... #####
-{ ...#. ..#.. ..#.. .#... ..#.. ..#.. ...#.
-| ..#.. ..#.. ..#.. ..#.. ..#.. ..#.. ..#..
-} .#... ..#.. ..#.. ...#. ..#.. ..#.. .#...
-~ ..... ..... .#... #.#.# ...#. ..... .....
-"##;
-
-const fn parse_font(src: &str) -> [[u8; 7]; 95] {
-    let b = src.as_bytes();
-    let mut font = [[0u8; 7]; 95];
-    let mut pos = 0;
-    let mut g = 0;
-    while g < 95 {
-        assert!(b[pos] == 32 + g as u8, "font: glyph out of order");
-        pos += 2;
-        let mut row = 0;
-        while row < 7 {
-            let mut bits = 0u8;
-            let mut col = 0;
-            while col < 5 {
-                bits <<= 1;
-                match b[pos + col] {
-                    b'#' => bits |= 1,
-                    b'.' => {}
-                    _ => panic!("font: row characters must be '#' or '.'"),
-                }
-                col += 1;
-            }
-            font[g][row] = bits;
-            pos += 6; // five pixels and a space or newline
-            row += 1;
-        }
-        g += 1;
-    }
-    font
-}
-
-static FONT: [[u8; 7]; 95] = parse_font(FONT_SRC);
-
-const DESCENDERS: &str = "gpqy";
-/// Rows a descending glyph is drawn below the others.
-const DESCENT: i64 = 2;
-
-/// Row offset at which `c` is drawn: [`DESCENT`] for letters with a descender, else 0.
-fn glyph_drop(c: char) -> i64 {
-    if DESCENDERS.contains(c) { DESCENT } else { 0 }
-}
-
-fn glyph(c: char) -> &'static [u8; 7] {
-    let code = c as u32;
-    if (32..=126).contains(&code) { &FONT[(code - 32) as usize] } else { &FONT[(b'?' - 32) as usize] }
-}
-
-/// Width in pixels of `text` at `scale`.
-fn text_width(text: &str, scale: i64) -> i64 {
-    let n = text.chars().count() as i64;
-    if n == 0 { 0 } else { (n * ADVANCE - 1) * scale }
-}
-
-// ---------------------------------------------------------------------------------------------
-// Canvas primitives.
-
-struct Canvas {
-    img: RgbImage,
-}
-
-/// Pixel rectangle `[x0, x1) × [y0, y1)`.
-#[derive(Clone, Copy, Debug)]
-struct Rect {
-    x0: i64,
-    y0: i64,
-    x1: i64,
-    y1: i64,
-}
-
-impl Canvas {
-    fn new(w: u32, h: u32) -> Self {
-        Self { img: RgbImage::from_pixel(w, h, Rgb([255, 255, 255])) }
-    }
-
-    fn w(&self) -> i64 {
-        self.img.width() as i64
-    }
-
-    fn h(&self) -> i64 {
-        self.img.height() as i64
-    }
-
-    /// Blends `color` over the pixel with opacity `alpha` (0..=1); off-canvas pixels are ignored.
-    fn blend(&mut self, x: i64, y: i64, color: [u8; 3], alpha: f64) {
-        if x < 0 || y < 0 || x >= self.w() || y >= self.h() || alpha <= 0.0 {
-            return;
-        }
-        let a = alpha.min(1.0);
-        let p = self.img.get_pixel_mut(x as u32, y as u32);
-        for (c, &new) in p.0.iter_mut().zip(color.iter()) {
-            *c = (*c as f64 * (1.0 - a) + new as f64 * a).round() as u8;
-        }
-    }
-
-    fn fill_rect(&mut self, r: Rect, color: [u8; 3], alpha: f64) {
-        for y in r.y0.max(0)..r.y1.min(self.h()) {
-            for x in r.x0.max(0)..r.x1.min(self.w()) {
-                self.blend(x, y, color, alpha);
-            }
-        }
-    }
-
-    fn rect_outline(&mut self, r: Rect, color: [u8; 3]) {
-        self.fill_rect(Rect { y1: r.y0 + 1, ..r }, color, 1.0);
-        self.fill_rect(Rect { y0: r.y1 - 1, ..r }, color, 1.0);
-        self.fill_rect(Rect { x1: r.x0 + 1, ..r }, color, 1.0);
-        self.fill_rect(Rect { x0: r.x1 - 1, ..r }, color, 1.0);
-    }
-
-    /// Antialiased segment of the given width, drawn only inside `clip`.
-    fn line(&mut self, a: (f64, f64), b: (f64, f64), width: f64, color: [u8; 3], clip: Rect) {
-        let half = width / 2.0;
-        let pad = half + 1.0;
-        let x0 = ((a.0.min(b.0) - pad).floor() as i64).max(clip.x0);
-        let x1 = ((a.0.max(b.0) + pad).ceil() as i64).min(clip.x1);
-        let y0 = ((a.1.min(b.1) - pad).floor() as i64).max(clip.y0);
-        let y1 = ((a.1.max(b.1) + pad).ceil() as i64).min(clip.y1);
-        let (dx, dy) = (b.0 - a.0, b.1 - a.1);
-        let len2 = dx * dx + dy * dy;
-        for y in y0..y1 {
-            for x in x0..x1 {
-                let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
-                let t = if len2 > 0.0 { (((px - a.0) * dx + (py - a.1) * dy) / len2).clamp(0.0, 1.0) } else { 0.0 };
-                let (cx, cy) = (a.0 + t * dx, a.1 + t * dy);
-                let d = ((px - cx).powi(2) + (py - cy).powi(2)).sqrt();
-                let coverage = (half + 0.5 - d).clamp(0.0, 1.0);
-                self.blend(x, y, color, coverage);
-            }
-        }
-    }
-
-    /// Antialiased filled disc, drawn only inside `clip`.
-    fn disc(&mut self, c: (f64, f64), radius: f64, color: [u8; 3], clip: Rect) {
-        let x0 = ((c.0 - radius - 1.0).floor() as i64).max(clip.x0);
-        let x1 = ((c.0 + radius + 1.0).ceil() as i64).min(clip.x1);
-        let y0 = ((c.1 - radius - 1.0).floor() as i64).max(clip.y0);
-        let y1 = ((c.1 + radius + 1.0).ceil() as i64).min(clip.y1);
-        for y in y0..y1 {
-            for x in x0..x1 {
-                let d = ((x as f64 + 0.5 - c.0).powi(2) + (y as f64 + 0.5 - c.1).powi(2)).sqrt();
-                self.blend(x, y, color, (radius + 0.5 - d).clamp(0.0, 1.0));
-            }
-        }
-    }
-
-    /// Text with its top-left corner at `(x, y)`.
-    fn text(&mut self, x: i64, y: i64, text: &str, scale: i64, color: [u8; 3]) {
-        for (i, c) in text.chars().enumerate() {
-            let gx = x + i as i64 * ADVANCE * scale;
-            let drop = glyph_drop(c);
-            for (row, bits) in glyph(c).iter().enumerate() {
-                let row = row as i64 + drop;
-                for col in 0..GLYPH_W {
-                    if bits & (1 << (GLYPH_W - 1 - col)) != 0 {
-                        let r = Rect {
-                            x0: gx + col * scale,
-                            y0: y + row * scale,
-                            x1: gx + (col + 1) * scale,
-                            y1: y + (row + 1) * scale,
-                        };
-                        self.fill_rect(r, color, 1.0);
-                    }
-                }
-            }
-        }
-    }
-
-    /// Text rotated 90° counter-clockwise (reads bottom to top), its baseline-left corner at
-    /// `(x, y)`: the text occupies `x .. x + 7·scale` horizontally and ends `width` pixels above `y`.
-    fn text_up(&mut self, x: i64, y: i64, text: &str, scale: i64, color: [u8; 3]) {
-        for (i, c) in text.chars().enumerate() {
-            let along = i as i64 * ADVANCE * scale;
-            let drop = glyph_drop(c);
-            for (row, bits) in glyph(c).iter().enumerate() {
-                let row = row as i64 + drop;
-                for col in 0..GLYPH_W {
-                    if bits & (1 << (GLYPH_W - 1 - col)) != 0 {
-                        // Unrotated (col, row) maps to (row, -col).
-                        let px = x + row * scale;
-                        let py = y - along - (col + 1) * scale;
-                        let r = Rect { x0: px, y0: py, x1: px + scale, y1: py + scale };
-                        self.fill_rect(r, color, 1.0);
-                    }
-                }
-            }
-        }
-    }
-}
-
-// ---------------------------------------------------------------------------------------------
-// Layout.
-
-const BLACK: [u8; 3] = [0, 0, 0];
-const AXIS: [u8; 3] = [60, 60, 60];
-const GRID: [u8; 3] = [225, 225, 225];
+const FONT: &str = "sans-serif";
+const TITLE_SIZE: f64 = 20.0;
+const LABEL_SIZE: f64 = 15.0;
+const TICK_SIZE: f64 = 13.0;
+const AXIS: RGBColor = RGBColor(60, 60, 60);
+const GRID: RGBColor = RGBColor(225, 225, 225);
+const LEGEND_BORDER: RGBColor = RGBColor(180, 180, 180);
 const BAND_ALPHA: f64 = 0.2;
-const LINE_WIDTH: f64 = 2.0;
-const MARKER_RADIUS: f64 = 3.0;
+const LINE_WIDTH: u32 = 2;
+const MARKER_RADIUS: i32 = 3;
+/// Legend: swatch length, gaps and the longest label kept (in characters).
+const SWATCH_W: i32 = 22;
+const LEGEND_PAD: i32 = 8;
+const LEGEND_MAX_CHARS: usize = 40;
 
-/// Where data coordinates land on the canvas.
-#[derive(Clone, Copy, Debug)]
-struct Frame {
-    plot: Rect,
-    x_range: (f64, f64),
-    y_range: (f64, f64),
+/// Registers DejaVu Sans (from the `dejavu` crate) as plotters' `sans-serif` font, once per process.
+fn ensure_font() -> Result<(), PlotError> {
+    static REGISTERED: OnceLock<bool> = OnceLock::new();
+    let ok = *REGISTERED.get_or_init(|| register_font(FONT, FontStyle::Normal, dejavu::sans::regular()).is_ok());
+    if ok { Ok(()) } else { Err(PlotError::Draw("the embedded DejaVu Sans font could not be loaded".into())) }
 }
 
-impl Frame {
-    fn px(&self, x: f64, y: f64) -> (f64, f64) {
-        let fx = (x - self.x_range.0) / (self.x_range.1 - self.x_range.0);
-        let fy = (y - self.y_range.0) / (self.y_range.1 - self.y_range.0);
-        let w = (self.plot.x1 - self.plot.x0 - 1) as f64;
-        let h = (self.plot.y1 - self.plot.y0 - 1) as f64;
-        (self.plot.x0 as f64 + 0.5 + fx * w, self.plot.y1 as f64 - 0.5 - fy * h)
-    }
+fn rgb(c: [u8; 3]) -> RGBColor {
+    RGBColor(c[0], c[1], c[2])
 }
+
+fn draw_err(e: impl std::fmt::Display) -> PlotError {
+    PlotError::Draw(e.to_string())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Layout: axis ranges and ticks, in data space.
 
 fn finite_point(p: &(f64, f64)) -> bool {
     p.0.is_finite() && p.1.is_finite()
@@ -594,8 +318,16 @@ fn widen_degenerate(r: (f64, f64)) -> (f64, f64) {
     }
 }
 
-/// Lays out the chart: axis ranges, ticks and the plot rectangle.
-fn layout(chart: &Chart, series: &[Series]) -> (Frame, Ticks, Ticks) {
+/// The axes of a chart: data ranges and the ticks shown inside them.
+#[derive(Clone, Debug, PartialEq)]
+struct Axes {
+    x_range: (f64, f64),
+    y_range: (f64, f64),
+    x_ticks: Ticks,
+    y_ticks: Ticks,
+}
+
+fn axes(chart: &Chart, series: &[Series]) -> Axes {
     let ext = extent(series);
     let x_range = widen_degenerate(ext.map_or((0.0, 1.0), |e| e.0));
     let x_ticks = nice_ticks(x_range.0, x_range.1, 8);
@@ -608,159 +340,275 @@ fn layout(chart: &Chart, series: &[Series]) -> (Frame, Ticks, Ticks) {
             (r, t)
         }
     };
-    let y_tick_w = y_ticks.values.iter().map(|&v| text_width(&format_tick(v, y_ticks.step), 1)).max().unwrap_or(0);
-    let legend_w = legend_width(series);
-    let (w, h) = (chart.width as i64, chart.height as i64);
-    let top = if chart.title.is_empty() { 16 } else { 16 + 2 * GLYPH_H + 14 };
-    let left = 12 + if chart.y_label.is_empty() { 0 } else { GLYPH_H + 10 } + y_tick_w + 8;
-    let bottom = 8 + GLYPH_H + 8 + if chart.x_label.is_empty() { 0 } else { GLYPH_H + 10 };
-    let right = if legend_w > 0 { legend_w + 24 } else { 24 };
-    // Never let margins eat the whole canvas (tiny images still get a plot of some size).
-    let x0 = left.min(w / 3);
-    let x1 = (w - right).max(x0 + w / 3);
-    let y0 = top.min(h / 3);
-    let y1 = (h - bottom).max(y0 + h / 3);
-    let frame = Frame { plot: Rect { x0, y0, x1, y1 }, x_range, y_range };
-    (frame, x_ticks, y_ticks)
+    Axes { x_range, y_range, x_ticks, y_ticks }
 }
 
-const SWATCH_W: i64 = 22;
+/// A linear plotters axis whose ticks (grid lines and labels) are ours: [`nice_ticks`] inside the
+/// range, labelled by `format_tick` with the ticks' step.
+#[derive(Clone)]
+struct TickedAxis {
+    linear: RangedCoordf64,
+    ticks: Vec<f64>,
+    step: f64,
+}
 
-fn legend_width(series: &[Series]) -> i64 {
-    let max_label = series.iter().map(|s| text_width(&s.label, 1)).max();
-    match max_label {
-        None => 0,
-        Some(t) => 8 + SWATCH_W + 6 + t.min(40 * ADVANCE) + 8,
+impl TickedAxis {
+    fn new(range: (f64, f64), ticks: &Ticks) -> Self {
+        Self { linear: (range.0..range.1).into(), ticks: ticks_inside(ticks, range), step: ticks.step }
     }
+}
+
+impl Ranged for TickedAxis {
+    type FormatOption = NoDefaultFormatting;
+    type ValueType = f64;
+
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        self.linear.map(value, limit)
+    }
+
+    /// Our ticks as plotters' bold key points; no light (minor) grid lines.
+    fn key_points<Hint: KeyPointHint>(&self, hint: Hint) -> Vec<f64> {
+        if hint.weight().allow_light_points() { Vec::new() } else { self.ticks.clone() }
+    }
+
+    fn range(&self) -> Range<f64> {
+        self.linear.range()
+    }
+}
+
+impl ValueFormatter<f64> for TickedAxis {
+    fn format_ext(&self, value: &f64) -> String {
+        format_tick(*value, self.step)
+    }
+}
+
+/// Tick values that lie in `range` (up to rounding).
+fn ticks_inside(t: &Ticks, range: (f64, f64)) -> Vec<f64> {
+    let tol = (range.1 - range.0) * 1e-9;
+    t.values.iter().copied().filter(|&v| v >= range.0 - tol && v <= range.1 + tol).collect()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Clipping to the y range, in data space (plotters clamps coordinates to the plot instead, which
+// would flatten out-of-range data onto the border).
+
+/// Parameter interval `[t0, t1]` ⊆ `[0, 1]` of the segment `a → b` whose y lies in `[lo, hi]`.
+fn clip_segment(a: (f64, f64), b: (f64, f64), lo: f64, hi: f64) -> Option<(f64, f64)> {
+    let dy = b.1 - a.1;
+    if dy == 0.0 {
+        return (a.1 >= lo && a.1 <= hi).then_some((0.0, 1.0));
+    }
+    let (ta, tb) = ((lo - a.1) / dy, (hi - a.1) / dy);
+    let (t0, t1) = (ta.min(tb).max(0.0), ta.max(tb).min(1.0));
+    (t0 <= t1).then_some((t0, t1))
+}
+
+fn lerp(a: (f64, f64), b: (f64, f64), t: f64) -> (f64, f64) {
+    (a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1))
+}
+
+/// The parts of a polyline inside `lo ≤ y ≤ hi`, as polylines; non-finite points break it.
+fn clip_polyline(points: &[(f64, f64)], lo: f64, hi: f64) -> Vec<Vec<(f64, f64)>> {
+    let mut out: Vec<Vec<(f64, f64)>> = Vec::new();
+    let mut open = false;
+    for pair in points.windows(2) {
+        let (a, b) = (pair[0], pair[1]);
+        let clipped = if finite_point(&a) && finite_point(&b) { clip_segment(a, b, lo, hi) } else { None };
+        let Some((t0, t1)) = clipped else {
+            open = false;
+            continue;
+        };
+        let (p, q) = (lerp(a, b, t0), lerp(a, b, t1));
+        if open && t0 == 0.0 {
+            if let Some(run) = out.last_mut() {
+                run.push(q);
+            }
+        } else {
+            out.push(vec![p, q]);
+        }
+        open = t1 == 1.0;
+    }
+    out
+}
+
+/// `min(max(y, lo), hi)` along a polyline, with the points where it crosses `lo` or `hi` added so
+/// that the clamped curve is exact between the samples.
+fn clamp_polyline(points: &[(f64, f64)], lo: f64, hi: f64) -> Vec<(f64, f64)> {
+    let clamp = |p: (f64, f64)| (p.0, p.1.clamp(lo, hi));
+    let mut out = Vec::with_capacity(points.len());
+    for (i, &p) in points.iter().enumerate() {
+        if i > 0 {
+            let a = points[i - 1];
+            let dy = p.1 - a.1;
+            let mut cross: Vec<f64> = [lo, hi]
+                .iter()
+                .filter(|&&level| (a.1 - level) * (p.1 - level) < 0.0)
+                .map(|&level| (level - a.1) / dy)
+                .collect();
+            cross.sort_by(f64::total_cmp);
+            out.extend(cross.into_iter().map(|t| clamp(lerp(a, p, t))));
+        }
+        out.push(clamp(p));
+    }
+    out
+}
+
+/// The band of `s` as polygons (upper edge forward, lower edge back), one per run of consecutive
+/// points with finite coordinates and half-widths, clipped to `lo ≤ y ≤ hi`.
+fn band_polygons(s: &Series, band: &[f64], lo: f64, hi: f64) -> Vec<Vec<(f64, f64)>> {
+    let mut polys = Vec::new();
+    let mut run: Vec<((f64, f64), f64)> = Vec::new();
+    let flush = |run: &mut Vec<((f64, f64), f64)>, polys: &mut Vec<Vec<(f64, f64)>>| {
+        if run.len() >= 2 {
+            let upper: Vec<_> = run.iter().map(|&(p, h)| (p.0, p.1 + h)).collect();
+            let lower: Vec<_> = run.iter().map(|&(p, h)| (p.0, p.1 - h)).collect();
+            let mut poly = clamp_polyline(&upper, lo, hi);
+            poly.extend(clamp_polyline(&lower, lo, hi).into_iter().rev());
+            polys.push(poly);
+        }
+        run.clear();
+    };
+    for (p, &h) in s.points.iter().zip(band) {
+        if finite_point(p) && h.is_finite() {
+            run.push((*p, h.abs()));
+        } else {
+            flush(&mut run, &mut polys);
+        }
+    }
+    flush(&mut run, &mut polys);
+    polys
+}
+
+// ---------------------------------------------------------------------------------------------
+// Drawing.
+
+/// Where the plot landed on the canvas: its pixel rectangle and the data ranges it shows (what the
+/// tests check the pixels against).
+#[derive(Clone, Debug)]
+#[cfg_attr(not(test), allow(dead_code))]
+struct Frame {
+    x_px: Range<i32>,
+    y_px: Range<i32>,
+    axes: Axes,
+}
+
+fn legend_label(s: &Series) -> String {
+    s.label.chars().take(LEGEND_MAX_CHARS).collect()
+}
+
+/// Draws the chart into `buf` (RGB, `chart.width × chart.height`).
+fn draw(chart: &Chart, series: &[Series], buf: &mut [u8]) -> Result<Frame, PlotError> {
+    let axes = axes(chart, series);
+    let (w, h) = (chart.width, chart.height);
+    let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
+    root.fill(&WHITE).map_err(draw_err)?;
+
+    let tick_font = (FONT, TICK_SIZE).into_font().color(&BLACK);
+    let label_font = (FONT, LABEL_SIZE).into_font().color(&BLACK);
+    let text_w = |text: &str, font: &TextStyle| root.estimate_text_size(text, font).map(|(tw, _)| tw as i32);
+
+    // Margins sized from the text they hold, never more than a third of the canvas.
+    let mut y_tick_w = 0;
+    for v in ticks_inside(&axes.y_ticks, axes.y_range) {
+        y_tick_w = y_tick_w.max(text_w(&format_tick(v, axes.y_ticks.step), &tick_font).map_err(draw_err)?);
+    }
+    let mut legend_w = 0;
+    for s in series {
+        legend_w = legend_w.max(text_w(&legend_label(s), &label_font).map_err(draw_err)?);
+    }
+    if !series.is_empty() {
+        legend_w += 3 * LEGEND_PAD + SWATCH_W;
+    }
+    let third_w = w as i32 / 3;
+    let third_h = h as i32 / 3;
+    let y_area = (y_tick_w + 12 + if chart.y_label.is_empty() { 0 } else { LABEL_SIZE as i32 + 10 }).min(third_w);
+    let x_area =
+        (TICK_SIZE as i32 + 14 + if chart.x_label.is_empty() { 0 } else { LABEL_SIZE as i32 + 10 }).min(third_h);
+    let right = (legend_w + 2 * LEGEND_PAD).max(24).min(third_w);
+
+    let mut builder = ChartBuilder::on(&root);
+    builder.margin(12).margin_right(right).x_label_area_size(x_area).y_label_area_size(y_area);
+    if !chart.title.is_empty() {
+        builder.caption(&chart.title, (FONT, TITLE_SIZE).into_font().color(&BLACK));
+    }
+    let x_axis = TickedAxis::new(axes.x_range, &axes.x_ticks);
+    let y_axis = TickedAxis::new(axes.y_range, &axes.y_ticks);
+    let mut ctx = builder.build_cartesian_2d(x_axis, y_axis).map_err(draw_err)?;
+
+    let mut mesh = ctx.configure_mesh();
+    mesh.bold_line_style(GRID)
+        .light_line_style(TRANSPARENT)
+        .axis_style(AXIS)
+        .label_style(tick_font.clone())
+        .axis_desc_style(label_font.clone());
+    if !chart.x_label.is_empty() {
+        mesh.x_desc(chart.x_label.as_str());
+    }
+    if !chart.y_label.is_empty() {
+        mesh.y_desc(chart.y_label.as_str());
+    }
+    mesh.draw().map_err(draw_err)?;
+
+    // Data: bands first, then lines, then markers, so that lines stay on top of every band.
+    let (lo, hi) = axes.y_range;
+    for s in series {
+        if let Some(band) = &s.band {
+            let fill = rgb(s.color).mix(BAND_ALPHA).filled();
+            ctx.draw_series(band_polygons(s, band, lo, hi).into_iter().map(|poly| Polygon::new(poly, fill)))
+                .map_err(draw_err)?;
+        }
+    }
+    for s in series {
+        let style = rgb(s.color).stroke_width(LINE_WIDTH);
+        ctx.draw_series(clip_polyline(&s.points, lo, hi).into_iter().map(|run| PathElement::new(run, style)))
+            .map_err(draw_err)?;
+    }
+    for s in series {
+        let fill = rgb(s.color).filled();
+        let inside = |p: &&(f64, f64)| finite_point(p) && p.1 >= lo && p.1 <= hi;
+        ctx.draw_series(s.points.iter().filter(inside).map(|&p| Circle::new(p, MARKER_RADIUS, fill)))
+            .map_err(draw_err)?;
+    }
+
+    // Axes box on top of the data.
+    let (x_px, y_px) = ctx.plotting_area().get_pixel_range();
+    root.draw(&Rectangle::new([(x_px.start, y_px.start), (x_px.end - 1, y_px.end - 1)], AXIS.stroke_width(1)))
+        .map_err(draw_err)?;
+
+    // Legend, right of the plot: a swatch (line and marker) and the label per series.
+    if !series.is_empty() {
+        let row_h = LABEL_SIZE as i32 + 9;
+        let x0 = x_px.end + 12;
+        let y0 = y_px.start;
+        let box_h = LEGEND_PAD + row_h * series.len() as i32;
+        root.draw(&Rectangle::new([(x0, y0), (x0 + legend_w, y0 + box_h)], LEGEND_BORDER.stroke_width(1)))
+            .map_err(draw_err)?;
+        for (i, s) in series.iter().enumerate() {
+            let cy = y0 + LEGEND_PAD / 2 + row_h * i as i32 + row_h / 2;
+            let sx = x0 + LEGEND_PAD;
+            let color = rgb(s.color);
+            root.draw(&PathElement::new(vec![(sx, cy), (sx + SWATCH_W, cy)], color.stroke_width(LINE_WIDTH)))
+                .map_err(draw_err)?;
+            root.draw(&Circle::new((sx + SWATCH_W / 2, cy), MARKER_RADIUS, color.filled())).map_err(draw_err)?;
+            let style = label_font.pos(plotters::style::text_anchor::Pos::new(
+                plotters::style::text_anchor::HPos::Left,
+                plotters::style::text_anchor::VPos::Center,
+            ));
+            root.draw(&Text::new(legend_label(s), (sx + SWATCH_W + LEGEND_PAD, cy), style)).map_err(draw_err)?;
+        }
+    }
+    root.present().map_err(draw_err)?;
+    Ok(Frame { x_px, y_px, axes })
 }
 
 /// Draws the chart into an RGB image (what [`write_png`] encodes).
 pub fn render(chart: &Chart, series: &[Series]) -> Result<RgbImage, PlotError> {
     validate(chart, series)?;
-    let (frame, x_ticks, y_ticks) = layout(chart, series);
-    let mut cv = Canvas::new(chart.width, chart.height);
-    let plot = frame.plot;
-    let inside = |v: f64, r: (f64, f64)| {
-        let tol = (r.1 - r.0) * 1e-9;
-        v >= r.0 - tol && v <= r.1 + tol
-    };
-
-    // Grid and ticks.
-    for &v in x_ticks.values.iter().filter(|&&v| inside(v, frame.x_range)) {
-        let px = frame.px(v, frame.y_range.0).0.floor() as i64;
-        cv.fill_rect(Rect { x0: px, x1: px + 1, ..plot }, GRID, 1.0);
-        cv.fill_rect(Rect { x0: px, x1: px + 1, y0: plot.y1, y1: plot.y1 + 4 }, AXIS, 1.0);
-        let label = format_tick(v, x_ticks.step);
-        let tw = text_width(&label, 1);
-        let lx = (px - tw / 2).clamp(0, (cv.w() - tw).max(0));
-        cv.text(lx, plot.y1 + 8, &label, 1, BLACK);
-    }
-    for &v in y_ticks.values.iter().filter(|&&v| inside(v, frame.y_range)) {
-        let py = frame.px(frame.x_range.0, v).1.floor() as i64;
-        cv.fill_rect(Rect { y0: py, y1: py + 1, ..plot }, GRID, 1.0);
-        cv.fill_rect(Rect { x0: plot.x0 - 4, x1: plot.x0, y0: py, y1: py + 1 }, AXIS, 1.0);
-        let label = format_tick(v, y_ticks.step);
-        let tw = text_width(&label, 1);
-        cv.text(plot.x0 - 8 - tw, py - GLYPH_H / 2, &label, 1, BLACK);
-    }
-
-    // Data: bands first, then lines, then markers, so that lines stay on top of every band.
-    let inner = Rect { x0: plot.x0 + 1, y0: plot.y0 + 1, x1: plot.x1 - 1, y1: plot.y1 - 1 };
-    for s in series {
-        if let Some(band) = &s.band {
-            draw_band(&mut cv, &frame, inner, s, band);
-        }
-    }
-    for s in series {
-        for pair in s.points.windows(2) {
-            if finite_point(&pair[0]) && finite_point(&pair[1]) {
-                let a = frame.px(pair[0].0, pair[0].1);
-                let b = frame.px(pair[1].0, pair[1].1);
-                cv.line(a, b, LINE_WIDTH, s.color, inner);
-            }
-        }
-    }
-    for s in series {
-        for p in s.points.iter().filter(|p| finite_point(p)) {
-            cv.disc(frame.px(p.0, p.1), MARKER_RADIUS, s.color, inner);
-        }
-    }
-
-    // Axes box on top of the data.
-    cv.rect_outline(plot, AXIS);
-
-    // Title, axis labels, legend.
-    if !chart.title.is_empty() {
-        let tw = text_width(&chart.title, 2);
-        cv.text(((cv.w() - tw) / 2).max(0), 12, &chart.title, 2, BLACK);
-    }
-    if !chart.x_label.is_empty() {
-        let tw = text_width(&chart.x_label, 1);
-        let cx = (plot.x0 + plot.x1) / 2;
-        cv.text((cx - tw / 2).max(0), plot.y1 + 8 + GLYPH_H + 10, &chart.x_label, 1, BLACK);
-    }
-    if !chart.y_label.is_empty() {
-        let tw = text_width(&chart.y_label, 1);
-        let cy = (plot.y0 + plot.y1) / 2;
-        cv.text_up(12, (cy + tw / 2).min(cv.h() - 1), &chart.y_label, 1, BLACK);
-    }
-    draw_legend(&mut cv, plot, series);
-    Ok(cv.img)
-}
-
-/// Fills between `y - band` and `y + band`, one pixel column at a time, per segment.
-fn draw_band(cv: &mut Canvas, frame: &Frame, clip: Rect, s: &Series, band: &[f64]) {
-    for i in 1..s.points.len() {
-        let (p, q) = (s.points[i - 1], s.points[i]);
-        let (hp, hq) = (band[i - 1].abs(), band[i].abs());
-        if !(finite_point(&p) && finite_point(&q) && hp.is_finite() && hq.is_finite()) {
-            continue;
-        }
-        let (mut a_lo, mut a_hi) = (frame.px(p.0, p.1 - hp), frame.px(p.0, p.1 + hp));
-        let (mut b_lo, mut b_hi) = (frame.px(q.0, q.1 - hq), frame.px(q.0, q.1 + hq));
-        if a_lo.0 > b_lo.0 {
-            std::mem::swap(&mut a_lo, &mut b_lo);
-            std::mem::swap(&mut a_hi, &mut b_hi);
-        }
-        // Half-open pixel columns so that neighbouring segments never fill a column twice.
-        let c0 = (a_lo.0 - 0.5).ceil() as i64;
-        let c1 = (b_lo.0 - 0.5).ceil() as i64;
-        let last = i == s.points.len() - 1;
-        let c1 = if last { c1 + 1 } else { c1 };
-        for x in c0.max(clip.x0)..c1.min(clip.x1) {
-            let span = b_lo.0 - a_lo.0;
-            let t = if span > 0.0 { ((x as f64 + 0.5 - a_lo.0) / span).clamp(0.0, 1.0) } else { 0.0 };
-            let top = a_hi.1 + t * (b_hi.1 - a_hi.1);
-            let bot = a_lo.1 + t * (b_lo.1 - a_lo.1);
-            let y0 = ((top - 0.5).round() as i64).max(clip.y0);
-            let y1 = ((bot - 0.5).round() as i64 + 1).min(clip.y1);
-            for y in y0..y1 {
-                cv.blend(x, y, s.color, BAND_ALPHA);
-            }
-        }
-    }
-}
-
-fn draw_legend(cv: &mut Canvas, plot: Rect, series: &[Series]) {
-    let width = legend_width(series);
-    if width == 0 {
-        return;
-    }
-    let row_h = GLYPH_H + 9;
-    let x0 = plot.x1 + 12;
-    let y0 = plot.y0;
-    let r = Rect { x0, y0, x1: x0 + width, y1: y0 + 6 + row_h * series.len() as i64 + 2 };
-    cv.rect_outline(r, [180, 180, 180]);
-    let clip = Rect { x0: 0, y0: 0, x1: cv.w(), y1: cv.h() };
-    for (i, s) in series.iter().enumerate() {
-        let cy = y0 + 6 + row_h * i as i64 + GLYPH_H / 2;
-        let sx = x0 + 8;
-        let mid = cy as f64 + 0.5;
-        cv.line((sx as f64, mid), ((sx + SWATCH_W) as f64, mid), LINE_WIDTH, s.color, clip);
-        cv.disc(((sx + SWATCH_W / 2) as f64, mid), MARKER_RADIUS, s.color, clip);
-        let label: String = s.label.chars().take(40).collect();
-        cv.text(sx + SWATCH_W + 6, cy - GLYPH_H / 2, &label, 1, BLACK);
-    }
+    ensure_font()?;
+    let mut buf = vec![0u8; chart.width as usize * chart.height as usize * 3];
+    draw(chart, series, &mut buf)?;
+    RgbImage::from_raw(chart.width, chart.height, buf)
+        .ok_or_else(|| PlotError::Draw("the drawing buffer does not match the chart size".into()))
 }
 
 /// Draws the chart and writes it as a PNG file at `path` (overwriting it). The file's directory must
@@ -792,6 +640,26 @@ mod tests {
         let dir = Scratch::new(&format!("plot_{name}"));
         std::fs::create_dir_all(&dir).unwrap();
         dir
+    }
+
+    /// Renders like [`render`], also returning where the plot landed.
+    fn render_framed(chart: &Chart, series: &[Series]) -> (RgbImage, Frame) {
+        validate(chart, series).unwrap();
+        ensure_font().unwrap();
+        let mut buf = vec![0u8; chart.width as usize * chart.height as usize * 3];
+        let frame = draw(chart, series, &mut buf).unwrap();
+        (RgbImage::from_raw(chart.width, chart.height, buf).unwrap(), frame)
+    }
+
+    /// Pixel of data point `(x, y)` (plotters maps the range ends to the plot's first and last
+    /// pixel; ±1 px of rounding).
+    fn px(f: &Frame, x: f64, y: f64) -> (u32, u32) {
+        let (xr, yr) = (f.axes.x_range, f.axes.y_range);
+        let fx = (x - xr.0) / (xr.1 - xr.0);
+        let fy = (y - yr.0) / (yr.1 - yr.0);
+        let col = f.x_px.start as f64 + fx * (f.x_px.end - f.x_px.start) as f64;
+        let row = f.y_px.end as f64 - fy * (f.y_px.end - f.y_px.start) as f64;
+        (col.round() as u32, row.round() as u32)
     }
 
     fn check_ticks(min: f64, max: f64) {
@@ -839,16 +707,35 @@ mod tests {
     }
 
     #[test]
-    fn font_has_ink_for_required_characters() {
-        for c in "0123456789abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ.-+%()/_:".chars() {
-            assert!(glyph(c).iter().any(|&r| r != 0), "{c:?} is blank");
-        }
-        assert!(glyph(' ').iter().all(|&r| r == 0));
-        assert_eq!(glyph('é'), glyph('?'));
-        // Distinct glyphs for characters that are easy to confuse.
-        for (a, b) in [('0', 'O'), ('1', 'l'), ('5', 'S'), ('8', 'B'), ('-', '_'), ('.', ',')] {
-            assert_ne!(glyph(a), glyph(b), "{a} vs {b}");
-        }
+    fn axes_span_the_data_and_widen_y_to_ticks() {
+        let s = Series {
+            band: Some(vec![0.05, 0.1, 0.0]),
+            ..Series::new("s", palette(0), vec![(100.0, 0.12), (2100.0, 0.5), (4923.0, 0.81)])
+        };
+        let a = axes(&Chart::default(), std::slice::from_ref(&s));
+        assert_eq!(a.x_range, (100.0, 4923.0));
+        assert_eq!(ticks_inside(&a.x_ticks, a.x_range), vec![1000.0, 2000.0, 3000.0, 4000.0]);
+        // y: 0.07 (0.12 - band) .. 0.81, widened to the enclosing ticks (step 0.2).
+        assert_eq!((a.y_range, a.y_ticks.step), ((0.0, 1.0), 0.2));
+        let fixed = Chart { y_range: Some((0.0, 1.0)), ..Chart::default() };
+        assert_eq!(axes(&fixed, &[s]).y_range, (0.0, 1.0));
+    }
+
+    #[test]
+    fn clipping_keeps_the_inside_and_splits_at_the_border() {
+        // A line from below the range to above it keeps only its inside part.
+        let runs = clip_polyline(&[(0.0, -1.0), (1.0, 1.0), (2.0, 3.0)], 0.0, 2.0);
+        assert_eq!(runs, vec![vec![(0.5, 0.0), (1.0, 1.0), (1.5, 2.0)]]);
+        // Leaving and re-entering gives two runs; NaN breaks a run too.
+        let runs =
+            clip_polyline(&[(0.0, 0.5), (1.0, 1.5), (2.0, 0.5), (3.0, f64::NAN), (4.0, 0.5), (5.0, 0.5)], 0.0, 1.0);
+        assert_eq!(
+            runs,
+            vec![vec![(0.0, 0.5), (0.5, 1.0)], vec![(1.5, 1.0), (2.0, 0.5)], vec![(4.0, 0.5), (5.0, 0.5)]]
+        );
+        // Clamping adds the crossing points.
+        let c = clamp_polyline(&[(0.0, 0.5), (1.0, 1.5), (2.0, -0.5)], 0.0, 1.0);
+        assert_eq!(c, vec![(0.0, 0.5), (0.5, 1.0), (1.0, 1.0), (1.25, 1.0), (1.75, 0.0), (2.0, 0.0)]);
     }
 
     #[test]
@@ -861,6 +748,10 @@ mod tests {
         write_png(&path, &chart, &[s]).unwrap();
         let img = image::open(&path).unwrap();
         assert_eq!((img.width(), img.height()), (640, 400));
+        // The smallest allowed size still draws.
+        let tiny = Chart { width: 64, height: 64, ..Chart::new("t", "x", "y") };
+        let img = render(&tiny, &[Series::new("s", palette(1), vec![(0.0, 0.0), (1.0, 1.0)])]).unwrap();
+        assert_eq!((img.width(), img.height()), (64, 64));
     }
 
     #[test]
@@ -868,20 +759,99 @@ mod tests {
         let chart = Chart { y_range: Some((0.0, 1.0)), ..Chart::new("t", "x", "y") };
         let color = [200, 30, 40];
         let s = Series::new("s", color, vec![(0.0, 0.0), (5.0, 0.5), (10.0, 1.0)]);
-        let img = render(&chart, std::slice::from_ref(&s)).unwrap();
-        let (frame, _, _) = layout(&chart, &[s]);
-        assert_eq!(frame.x_range, (0.0, 10.0));
-        let (px, py) = frame.px(5.0, 0.5);
-        let (px, py) = (px.floor() as i64, py.floor() as i64);
-        // The mapping agrees with the plot rectangle: the middle of the data is the middle of the plot.
-        assert!((px - (frame.plot.x0 + frame.plot.x1) / 2).abs() <= 1);
-        assert!((py - (frame.plot.y0 + frame.plot.y1) / 2).abs() <= 1);
-        let found = (-2..=2).any(|dy| (-2..=2).any(|dx| img.get_pixel((px + dx) as u32, (py + dy) as u32).0 == color));
+        let (img, frame) = render_framed(&chart, std::slice::from_ref(&s));
+        assert_eq!(frame.axes.x_range, (0.0, 10.0));
+        let (px, py) = px(&frame, 5.0, 0.5);
+        // The middle of the data is the middle of the plot.
+        assert!((px as i32 - (frame.x_px.start + frame.x_px.end) / 2).abs() <= 1);
+        assert!((py as i32 - (frame.y_px.start + frame.y_px.end) / 2).abs() <= 1);
+        let found = (-2..=2).any(|dy: i32| {
+            (-2..=2).any(|dx: i32| img.get_pixel(px.wrapping_add_signed(dx), py.wrapping_add_signed(dy)).0 == color)
+        });
         assert!(found, "series colour not near ({px}, {py})");
-        for y in 0..frame.plot.y0.min(20) as u32 {
-            for x in 0..frame.plot.x0.min(20) as u32 {
+        // Nothing of the series outside the plot, e.g. in the top-left corner.
+        for y in 0..frame.y_px.start.min(20) as u32 {
+            for x in 0..frame.x_px.start.min(20) as u32 {
                 assert_ne!(img.get_pixel(x, y).0, color, "colour leaked to ({x}, {y})");
             }
+        }
+    }
+
+    #[test]
+    fn band_is_filled_between_the_curves_and_only_there() {
+        let chart = Chart { y_range: Some((0.0, 1.0)), ..Chart::new("band", "x", "y") };
+        let color = palette(0);
+        let s = Series {
+            band: Some(vec![0.2; 3]),
+            ..Series::new("mean", color, vec![(0.0, 0.5), (5.0, 0.5), (10.0, 0.5)])
+        };
+        let (img, frame) = render_framed(&chart, &[s]);
+        // Translucent band colour over white: 0.2 × colour + 0.8 × 255 per channel (±2 of rounding).
+        let tint: [u8; 3] = color.map(|c| (c as f64 * BAND_ALPHA + 255.0 * (1.0 - BAND_ALPHA)).round() as u8);
+        let near = |a: [u8; 3], b: [u8; 3]| a.iter().zip(b).all(|(&x, y)| (x as i32 - y as i32).abs() <= 2);
+        // (Away from the grid lines at x = 0, 2, 4 … and y = 0, 0.2, 0.4 …, which the band tints too.)
+        for x in [2.9, 7.1] {
+            for y in [0.33, 0.45, 0.55, 0.67] {
+                let (c, r) = px(&frame, x, y);
+                assert!(
+                    near(img.get_pixel(c, r).0, tint),
+                    "({x}, {y}) at ({c}, {r}): {:?}, want {tint:?}",
+                    img.get_pixel(c, r).0
+                );
+            }
+            // Outside the band (0.3..0.7): no tint (white, or the grey grid).
+            for y in [0.1, 0.25, 0.75, 0.9] {
+                let (c, r) = px(&frame, x, y);
+                let p = img.get_pixel(c, r).0;
+                assert!(p[0] == p[1] && p[1] == p[2], "({x}, {y}) at ({c}, {r}) is tinted: {p:?}");
+            }
+            // The mean line itself is drawn on top in the full colour.
+            let (c, r) = px(&frame, x, 0.5);
+            let on_line = (-1..=1).any(|d: i32| img.get_pixel(c, r.wrapping_add_signed(d)).0 == color);
+            assert!(on_line, "mean line not at ({c}, {r})");
+        }
+    }
+
+    #[test]
+    fn a_band_past_a_fixed_range_is_clipped_at_the_border() {
+        let chart = Chart { y_range: Some((0.0, 1.0)), ..Chart::default() };
+        let s = Series { band: Some(vec![0.5; 2]), ..Series::new("s", palette(2), vec![(0.0, 0.75), (1.0, 0.75)]) };
+        let polys = band_polygons(&s, s.band.as_ref().unwrap(), 0.0, 1.0);
+        assert_eq!(polys, vec![vec![(0.0, 1.0), (1.0, 1.0), (1.0, 0.25), (0.0, 0.25)]]);
+        let (img, frame) = render_framed(&chart, &[s]);
+        // Above the plot (between the title area and the plot's top edge) nothing is tinted.
+        let (c, _) = px(&frame, 0.5, 1.0);
+        for r in (frame.y_px.start - 6).max(0)..frame.y_px.start {
+            let p = img.get_pixel(c, r as u32).0;
+            assert!(p[0] == p[1] && p[1] == p[2], "band leaked above the plot at ({c}, {r}): {p:?}");
+        }
+    }
+
+    #[test]
+    fn text_is_drawn_for_title_labels_and_legend() {
+        let chart = Chart::new("A title", "updates", "success");
+        let s = Series::new("Equi SAC (4 seeds)", palette(0), vec![(0.0, 0.0), (1.0, 1.0)]);
+        let (img, frame) = render_framed(&chart, &[s]);
+        let dark = |img: &RgbImage, xs: Range<u32>, ys: Range<u32>| {
+            ys.flat_map(|y| xs.clone().map(move |x| (x, y)))
+                .filter(|&(x, y)| img.get_pixel(x, y).0.iter().all(|&v| v < 100))
+                .count()
+        };
+        let (w, h) = (img.width(), img.height());
+        let (x0, x1, y0, y1) =
+            (frame.x_px.start as u32, frame.x_px.end as u32, frame.y_px.start as u32, frame.y_px.end as u32);
+        // Regions that hold only one piece of text each (clear of the tick labels), and the dark
+        // (ink) pixels each must have: some, but far from a filled block.
+        let regions = [
+            ("title", 0..w, 0..y0 - 8),
+            ("legend", x1 + 12..w, y0..y0 + 30),
+            ("x label", x0..x1, y1 + 26..h),
+            ("y label", 0..12 + LABEL_SIZE as u32 + 4, y0..y1),
+        ];
+        for (what, xs, ys) in regions {
+            let area = xs.len() * ys.len();
+            let ink = dark(&img, xs, ys);
+            assert!(ink > 20 && ink < area / 4, "{what}: {ink} dark pixels of {area}");
         }
     }
 

@@ -1,198 +1,251 @@
-//! A one-line progress display for the training binary, written to stderr, e.g.
-//! `[#####...............]  24% 1234/5000 updates | SPS 45.6 | eval 0.80 | 03:21 elapsed, ETA 10:02`.
+//! The training binary's progress display on stderr, drawn by [`indicatif`], e.g.
+//! `[#####...............]  24% 1234/5000 updates | 00:03:21 elapsed, ETA 00:10:02 | SPS 45.6 | eval 0.80`.
 //!
-//! When stderr is a terminal the line is rewritten in place (`\r`) at most five times a second;
-//! otherwise (CI logs, files) a full line is printed at most every ten seconds and once at
-//! [`Progress::finish`], so logs stay short. The formatting is the pure function
-//! [`Progress::render`]; only [`Progress::update`] and [`Progress::finish`] read the clock.
+//! When stderr is a terminal the bar is redrawn in place at most five times a second, and cut to
+//! the terminal's width; otherwise (CI logs, files, `TERM=dumb`) indicatif draws nothing and a plain
+//! line ([`log_line`]) is printed at most every ten seconds and once at [`Progress::finish`], so logs
+//! stay short.
 //!
-//! Limitations: the ETA assumes a constant rate since the start; the line is not truncated to the
-//! terminal width (a line longer than the terminal wraps, and the `\r` rewrite then only replaces
-//! its last row); interleaved `log` output on stderr breaks the in-place line until the next redraw.
+//! Limitations: interleaved `log` output on stderr breaks the in-place bar until the next redraw;
+//! the ETA is indicatif's estimate from the recent rate (the plain line's too).
 
-use std::io::{IsTerminal, Write};
+use std::io::Write;
 use std::time::{Duration, Instant};
+
+use indicatif::{FormattedDuration, ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 /// Number of characters inside the bar's brackets.
 pub const BAR_WIDTH: usize = 20;
 
-const TTY_INTERVAL: Duration = Duration::from_millis(200);
+const TTY_HZ: u8 = 5;
 const LOG_INTERVAL: Duration = Duration::from_secs(10);
+const TEMPLATE: &str =
+    "[{bar:20}] {percent:>3}% {pos}/{len} {prefix} | {elapsed_precise} elapsed, ETA {eta_precise}{wide_msg}";
+
+/// Where the plain lines of the non-terminal mode go, and when the last one went.
+struct LogLines {
+    out: Box<dyn Write + Send>,
+    last: Option<Instant>,
+}
 
 /// Progress of a run of `total` units (updates, steps, episodes…).
-#[derive(Debug)]
 pub struct Progress {
-    total: u64,
+    bar: ProgressBar,
     unit: String,
-    start: Instant,
-    last_draw: Option<Instant>,
-    interactive: bool,
-    last_len: usize,
-    done: u64,
-    fields: Vec<(String, String)>,
+    fields: String,
+    /// `Some` when the bar is not drawn (stderr is not a terminal): plain lines instead.
+    log: Option<LogLines>,
     finished: bool,
 }
 
+impl std::fmt::Debug for Progress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Progress")
+            .field("position", &self.bar.position())
+            .field("total", &self.bar.length())
+            .field("unit", &self.unit)
+            .field("interactive", &self.log.is_none())
+            .field("finished", &self.finished)
+            .finish()
+    }
+}
+
 impl Progress {
-    /// Starts the clock for a run of `total` units named `unit` (e.g. `"updates"`); interactive
-    /// (in-place) mode is chosen when stderr is a terminal.
+    /// Starts the clock for a run of `total` units named `unit` (e.g. `"updates"`): an in-place bar
+    /// when stderr is a terminal, plain lines otherwise.
     pub fn new(total: u64, unit: &str) -> Self {
-        Self {
-            total,
-            unit: unit.to_string(),
-            start: Instant::now(),
-            last_draw: None,
-            interactive: std::io::stderr().is_terminal(),
-            last_len: 0,
-            done: 0,
-            fields: Vec::new(),
-            finished: false,
-        }
+        let target = ProgressDrawTarget::stderr_with_hz(TTY_HZ);
+        let log = target.is_hidden().then(|| LogLines { out: Box::new(std::io::stderr()), last: None });
+        Self::with_target(total, unit, target, log)
+    }
+
+    fn with_target(total: u64, unit: &str, target: ProgressDrawTarget, log: Option<LogLines>) -> Self {
+        let style =
+            ProgressStyle::with_template(TEMPLATE).expect("the progress template is valid").progress_chars("#.");
+        let bar = ProgressBar::with_draw_target(Some(total), target).with_style(style).with_prefix(unit.to_string());
+        Self { bar, unit: unit.to_string(), fields: String::new(), log, finished: false }
     }
 
     /// Records that `done` units are complete, with extra `(name, value)` fields shown as
     /// `name value` between `|` separators (an empty name shows the value alone), and redraws if the
     /// rate limit allows.
     pub fn update(&mut self, done: u64, fields: &[(&str, String)]) {
-        self.done = done;
-        self.fields = fields.iter().map(|(k, v)| (k.to_string(), v.clone())).collect();
+        self.fields = format_fields(fields);
+        self.bar.set_message(self.fields.clone());
+        self.bar.set_position(done);
         let now = Instant::now();
-        let interval = if self.interactive { TTY_INTERVAL } else { LOG_INTERVAL };
-        if self.last_draw.is_none_or(|t| now.duration_since(t) >= interval) {
-            self.last_draw = Some(now);
-            self.draw(false);
+        if let Some(log) = &mut self.log
+            && log.last.is_none_or(|t| now.duration_since(t) >= LOG_INTERVAL)
+        {
+            log.last = Some(now);
+            self.write_line();
         }
     }
 
-    /// Draws the final state (the last `update`) and ends the line; later calls do nothing.
+    /// Draws the final state (the last `update`, not a full bar) and ends the line; later calls do
+    /// nothing.
     pub fn finish(&mut self) {
-        if !self.finished {
-            self.finished = true;
-            self.draw(true);
+        if self.finished {
+            return;
+        }
+        self.finished = true;
+        self.bar.abandon();
+        if self.log.is_some() {
+            self.write_line();
         }
     }
 
-    fn draw(&mut self, last: bool) {
-        let fields: Vec<(&str, String)> = self.fields.iter().map(|(k, v)| (k.as_str(), v.clone())).collect();
-        let line = self.render(self.done, &fields, self.start.elapsed());
-        let mut err = std::io::stderr().lock();
-        // Progress output is best effort: a closed stderr must not stop training.
-        let _ = if self.interactive {
-            let pad = self.last_len.saturating_sub(line.chars().count());
-            self.last_len = line.chars().count();
-            let end = if last { "\n" } else { "" };
-            write!(err, "\r{line}{:pad$}{end}", "")
-        } else {
-            writeln!(err, "{line}")
-        };
-        let _ = err.flush();
-    }
-
-    /// Formats the progress line for `done` units after `elapsed`, without reading any clock: the
-    /// bar ([`BAR_WIDTH`] characters, `#` done, `.` to do), the floor of the percentage, the count
-    /// and unit, the fields, the elapsed time and, while `0 < done < total`, the estimated time
-    /// left assuming a constant rate (`ETA --:--` at `done == 0`). Durations are `MM:SS`, or
-    /// `H:MM:SS` from one hour on. `done` above `total` shows a full bar; `total == 0` counts as
-    /// complete.
-    pub fn render(&self, done: u64, fields: &[(&str, String)], elapsed: Duration) -> String {
-        let total = self.total;
-        let filled = if total == 0 {
-            BAR_WIDTH
-        } else {
-            ((done.min(total) as u128 * BAR_WIDTH as u128) / total as u128) as usize
-        };
-        let percent = if total == 0 { 100 } else { (done.min(total) as u128 * 100 / total as u128) as u64 };
-        let mut s = format!(
-            "[{}{}] {percent:>3}% {done}/{total} {}",
-            "#".repeat(filled),
-            ".".repeat(BAR_WIDTH - filled),
-            self.unit
-        );
-        for (name, value) in fields {
-            if name.is_empty() {
-                s.push_str(&format!(" | {value}"));
-            } else {
-                s.push_str(&format!(" | {name} {value}"));
-            }
+    fn write_line(&mut self) {
+        let total = self.bar.length().unwrap_or(0);
+        let done = self.bar.position();
+        let eta = (done > 0 && done < total).then(|| self.bar.eta());
+        let line = log_line(done, total, &self.unit, &self.fields, self.bar.elapsed(), eta);
+        if let Some(log) = &mut self.log {
+            // Progress output is best effort: a closed stderr must not stop training.
+            let _ = writeln!(log.out, "{line}");
+            let _ = log.out.flush();
         }
-        s.push_str(&format!(" | {} elapsed", format_duration(elapsed.as_secs())));
-        if done == 0 && total > 0 {
-            s.push_str(", ETA --:--");
-        } else if done < total {
-            let left = elapsed.as_secs_f64() * (total - done) as f64 / done as f64;
-            if left.is_finite() && left < 1e9 {
-                s.push_str(&format!(", ETA {}", format_duration(left.round() as u64)));
-            } else {
-                s.push_str(", ETA --:--");
-            }
-        }
-        s
     }
 }
 
-/// `MM:SS` below an hour, `H:MM:SS` from one hour on.
-fn format_duration(secs: u64) -> String {
-    let (h, m, s) = (secs / 3600, secs / 60 % 60, secs % 60);
-    if h > 0 { format!("{h}:{m:02}:{s:02}") } else { format!("{m:02}:{s:02}") }
+/// ` | name value` per field (` | value` for an empty name).
+fn format_fields(fields: &[(&str, String)]) -> String {
+    let mut s = String::new();
+    for (name, value) in fields {
+        if name.is_empty() {
+            s.push_str(&format!(" | {value}"));
+        } else {
+            s.push_str(&format!(" | {name} {value}"));
+        }
+    }
+    s
+}
+
+/// The plain line printed when stderr is not a terminal, without reading any clock: the floor of the
+/// percentage, the count and unit, the elapsed time and the estimated time left (`--:--:--` when
+/// `eta` is `None`; nothing once `done` reaches `total`), then the fields as formatted for
+/// [`Progress::update`]. Durations are indicatif's `HH:MM:SS`. `done` above `total` counts as 100%;
+/// `total == 0` as complete.
+pub fn log_line(done: u64, total: u64, unit: &str, fields: &str, elapsed: Duration, eta: Option<Duration>) -> String {
+    let percent = if total == 0 { 100 } else { (done.min(total) as u128 * 100 / total as u128) as u64 };
+    let mut s = format!("{percent:>3}% {done}/{total} {unit} | {} elapsed", FormattedDuration(elapsed));
+    if done < total {
+        match eta {
+            Some(eta) => s.push_str(&format!(", ETA {}", FormattedDuration(eta))),
+            None => s.push_str(", ETA --:--:--"),
+        }
+    }
+    s.push_str(fields);
+    s
 }
 
 #[cfg(test)]
 mod tests {
+    use std::sync::{Arc, Mutex};
+
+    use indicatif::InMemoryTerm;
+
     use super::*;
 
-    fn bar(line: &str) -> &str {
-        let end = line.find(']').unwrap();
-        &line[1..end]
-    }
+    /// A writer whose bytes the test can read back.
+    #[derive(Clone, Default)]
+    struct Shared(Arc<Mutex<Vec<u8>>>);
 
-    #[test]
-    fn bar_has_fixed_width_and_fills_proportionally() {
-        let p = Progress::new(5000, "updates");
-        for done in [0, 1, 1234, 2500, 4999, 5000, 7000] {
-            let line = p.render(done, &[], Duration::from_secs(10));
-            assert_eq!(bar(&line).chars().count(), BAR_WIDTH, "{line}");
+    impl Write for Shared {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            self.0.lock().unwrap().extend_from_slice(buf);
+            Ok(buf.len())
         }
-        let line = p.render(2500, &[], Duration::from_secs(10));
-        assert_eq!(bar(&line), "##########..........");
-        assert_eq!(bar(&p.render(7000, &[], Duration::ZERO)), "#".repeat(BAR_WIDTH));
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    impl Shared {
+        fn lines(&self) -> Vec<String> {
+            String::from_utf8(self.0.lock().unwrap().clone()).unwrap().lines().map(String::from).collect()
+        }
+    }
+
+    fn fields() -> Vec<(&'static str, String)> {
+        vec![("SPS", "45.6".to_string()), ("eval", "0.80".to_string()), ("", "warm-up".into())]
     }
 
     #[test]
-    fn percentages_at_zero_and_total() {
-        let p = Progress::new(5000, "updates");
-        let start = p.render(0, &[], Duration::ZERO);
-        assert_eq!(start, "[....................]   0% 0/5000 updates | 00:00 elapsed, ETA --:--");
-        let end = p.render(5000, &[], Duration::from_secs(201));
-        assert_eq!(end, "[####################] 100% 5000/5000 updates | 03:21 elapsed");
-        assert!(p.render(4999, &[], Duration::from_secs(1)).contains(" 99% "));
+    fn terminal_bar_shows_fill_count_fields_and_eta() {
+        let term = InMemoryTerm::new(4, 160);
+        let target = ProgressDrawTarget::term_like(Box::new(term.clone()));
+        let mut p = Progress::with_target(5000, "updates", target, None);
+        p.update(2500, &fields());
+        p.finish();
+        let screen = term.contents();
+        let line = screen.lines().find(|l| l.starts_with('[')).unwrap_or_else(|| panic!("no bar in {screen:?}"));
+        assert!(line.starts_with("[##########..........]  50% 2500/5000 updates | "), "{line}");
+        assert_eq!(line[1..line.find(']').unwrap()].chars().count(), BAR_WIDTH);
+        assert!(line.contains(" elapsed, ETA "), "{line}");
+        assert!(line.trim_end().ends_with("| SPS 45.6 | eval 0.80 | warm-up"), "{line}");
+        // finish() keeps the last position: a run stopped early does not show a full bar.
+        assert_eq!(p.bar.position(), 2500);
     }
 
     #[test]
-    fn fields_and_eta_are_formatted() {
-        let p = Progress::new(5000, "updates");
-        let fields = [("SPS", "45.6".to_string()), ("eval", "0.80".to_string()), ("", "warm-up".into())];
-        let line = p.render(1000, &fields, Duration::from_secs(100));
+    fn terminal_bar_is_cut_to_the_terminal_width() {
+        let term = InMemoryTerm::new(4, 60);
+        let target = ProgressDrawTarget::term_like(Box::new(term.clone()));
+        let mut p = Progress::with_target(100, "episodes", target, None);
+        p.update(10, &[("note", "x".repeat(200))]);
+        p.finish();
+        for line in term.contents().lines() {
+            assert!(line.chars().count() <= 60, "{line:?}");
+        }
+        assert!(term.contents().contains("10/100 episodes"), "{}", term.contents());
+    }
+
+    #[test]
+    fn without_a_terminal_plain_lines_are_rate_limited_and_end_at_finish() {
+        let out = Shared::default();
+        let log = LogLines { out: Box::new(out.clone()), last: None };
+        let mut p = Progress::with_target(5000, "updates", ProgressDrawTarget::hidden(), Some(log));
+        p.update(1, &[]);
+        // Within ten seconds of the first line: no new line.
+        for done in 2..=100 {
+            p.update(done, &fields());
+        }
+        assert_eq!(out.lines().len(), 1, "{:?}", out.lines());
+        assert!(out.lines()[0].starts_with("  0% 1/5000 updates | 00:00:00 elapsed, ETA "), "{:?}", out.lines());
+        p.finish();
+        p.finish();
+        let lines = out.lines();
+        assert_eq!(lines.len(), 2, "{lines:?}");
+        assert!(lines[1].starts_with("  2% 100/5000 updates | "), "{lines:?}");
+        assert!(lines[1].ends_with(" | SPS 45.6 | eval 0.80 | warm-up"), "{lines:?}");
+        assert!(!lines.iter().any(|l| l.contains('\r') || l.contains('\x1b')), "{lines:?}");
+    }
+
+    #[test]
+    fn plain_lines_format_counts_durations_and_eta() {
+        let f = format_fields(&fields());
+        assert_eq!(f, " | SPS 45.6 | eval 0.80 | warm-up");
+        let line = log_line(1000, 5000, "updates", &f, Duration::from_secs(100), Some(Duration::from_secs(400)));
+        assert_eq!(line, " 20% 1000/5000 updates | 00:01:40 elapsed, ETA 00:06:40 | SPS 45.6 | eval 0.80 | warm-up");
         assert_eq!(
-            line,
-            "[####................]  20% 1000/5000 updates | SPS 45.6 | eval 0.80 | warm-up | 01:40 elapsed, ETA 06:40"
+            log_line(0, 5000, "updates", "", Duration::ZERO, None),
+            "  0% 0/5000 updates | 00:00:00 elapsed, ETA --:--:--"
         );
-        // ETA in hours: 10 units in 1 h of a 100-unit run leaves 9 h.
-        let p = Progress::new(100, "episodes");
-        let line = p.render(10, &[], Duration::from_secs(3600));
-        assert!(line.ends_with("1:00:00 elapsed, ETA 9:00:00"), "{line}");
-        assert_eq!(format_duration(3600 * 12 + 61), "12:01:01");
-    }
-
-    #[test]
-    fn no_division_by_zero() {
-        let p = Progress::new(5000, "updates");
-        // done = 0, elapsed = 0.
-        assert!(p.render(0, &[], Duration::ZERO).contains("ETA --:--"));
-        // done > 0, elapsed = 0: nothing left to estimate but no NaN either.
-        assert!(p.render(1, &[], Duration::ZERO).ends_with("ETA 00:00"));
-        let empty = Progress::new(0, "updates");
-        let line = empty.render(0, &[], Duration::ZERO);
-        assert!(line.starts_with("[####################] 100% 0/0 updates"), "{line}");
-        assert!(!line.contains("NaN") && !line.contains("inf"));
+        assert_eq!(
+            log_line(5000, 5000, "updates", "", Duration::from_secs(201), None),
+            "100% 5000/5000 updates | 00:03:21 elapsed"
+        );
+        assert!(log_line(4999, 5000, "updates", "", Duration::from_secs(1), None).starts_with(" 99% "));
+        assert!(
+            log_line(10, 100, "episodes", "", Duration::from_secs(3600), Some(Duration::from_secs(9 * 3600)))
+                .ends_with("01:00:00 elapsed, ETA 09:00:00")
+        );
+        // Nothing to divide by.
+        assert_eq!(log_line(0, 0, "updates", "", Duration::ZERO, None), "100% 0/0 updates | 00:00:00 elapsed");
+        assert_eq!(
+            log_line(7000, 5000, "updates", "", Duration::ZERO, None),
+            "100% 7000/5000 updates | 00:00:00 elapsed"
+        );
     }
 }

@@ -1,23 +1,29 @@
-//! A minimal safetensors writer and reader for named F32 tensors plus string metadata (the
-//! optimiser state of checkpoints). The format: an 8-byte little-endian header length, a JSON
-//! header `{name: {dtype, shape, data_offsets}, "__metadata__": {..}}`, then the raw data.
+//! Named F32 tensors plus string metadata in a safetensors file (the optimiser state of
+//! checkpoints), read and written with the [`safetensors`] crate. Files written before equiarm used
+//! that crate were safetensors files already (8-byte header length, JSON header, raw little-endian
+//! data) and read the same way.
 //!
 //! Limitations: F32 only; the whole file is read into memory.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::io::Write as _;
 use std::path::Path;
 
+use safetensors::tensor::TensorView;
+use safetensors::{Dtype, SafeTensors};
+
 /// Reading failed.
-#[derive(Debug)]
+#[derive(Debug, thiserror::Error)]
 pub enum ReadError {
     /// I/O.
+    #[error("{0}")]
     Io(std::io::Error),
     /// Not a valid file.
+    #[error("{0}")]
     Format(String),
 }
 
-/// A file's contents: tensors `(name, shape, data)` in file order and the metadata.
+/// A file's contents: tensors `(name, shape, data)` sorted by name, and the metadata.
 pub struct TensorFile {
     /// Tensors.
     pub tensors: Vec<(String, Vec<usize>, Vec<f32>)>,
@@ -25,37 +31,30 @@ pub struct TensorFile {
     pub meta: BTreeMap<String, String>,
 }
 
-/// Write `tensors` and `meta` to `path` (through `path.tmp` and a rename).
+/// Write `tensors` and `meta` to `path` (through `path.tmp`, synced, and a rename). Shapes must
+/// match the data lengths.
 pub fn write(
     path: &Path,
     tensors: &[(String, Vec<usize>, Vec<f32>)],
     meta: &[(String, String)],
 ) -> std::io::Result<()> {
-    let mut header = serde_json::Map::new();
-    let m: serde_json::Map<String, serde_json::Value> =
-        meta.iter().map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone()))).collect();
-    header.insert("__metadata__".into(), serde_json::Value::Object(m));
-    let mut offset = 0usize;
-    for (name, shape, data) in tensors {
-        let end = offset + data.len() * 4;
-        header.insert(name.clone(), serde_json::json!({"dtype": "F32", "shape": shape, "data_offsets": [offset, end]}));
-        offset = end;
-    }
-    let mut text = serde_json::to_vec(&serde_json::Value::Object(header))?;
-    while text.len() % 8 != 0 {
-        text.push(b' ');
-    }
+    let invalid =
+        |e: safetensors::SafeTensorError| std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string());
+    let bytes: Vec<Vec<u8>> =
+        tensors.iter().map(|(_, _, data)| data.iter().flat_map(|x| x.to_le_bytes()).collect()).collect();
+    let views = tensors
+        .iter()
+        .zip(&bytes)
+        .map(|((name, shape, _), b)| Ok((name.as_str(), TensorView::new(Dtype::F32, shape.clone(), b)?)))
+        .collect::<Result<Vec<_>, safetensors::SafeTensorError>>()
+        .map_err(invalid)?;
+    let info: HashMap<String, String> = meta.iter().cloned().collect();
+    let file = safetensors::serialize(views, Some(info)).map_err(invalid)?;
     let tmp = path.with_extension("tmp");
     {
-        let mut f = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
-        f.write_all(&(text.len() as u64).to_le_bytes())?;
-        f.write_all(&text)?;
-        for (_, _, data) in tensors {
-            for x in data {
-                f.write_all(&x.to_le_bytes())?;
-            }
-        }
-        f.into_inner().map_err(|e| e.into_error())?.sync_all()?;
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(&file)?;
+        f.sync_all()?;
     }
     std::fs::rename(&tmp, path)
 }
@@ -63,45 +62,101 @@ pub fn write(
 /// Read a file written by [`write()`] (or any safetensors file of F32 tensors).
 pub fn read(path: &Path) -> Result<TensorFile, ReadError> {
     let bytes = std::fs::read(path).map_err(ReadError::Io)?;
-    let bad = |m: &str| ReadError::Format(m.to_string());
-    if bytes.len() < 8 {
-        return Err(bad("shorter than the 8-byte header length: not a safetensors file"));
-    }
-    let n = u64::from_le_bytes(bytes[..8].try_into().unwrap_or_default()) as usize;
-    let body_start = 8usize
-        .checked_add(n)
-        .filter(|&e| e <= bytes.len())
-        .ok_or_else(|| bad("header length runs past the end of the file"))?;
-    let header: serde_json::Value = serde_json::from_slice(&bytes[8..body_start])
-        .map_err(|e| ReadError::Format(format!("header is not JSON: {e}")))?;
-    let obj = header.as_object().ok_or_else(|| bad("header is not a JSON object"))?;
-    let body = &bytes[body_start..];
-    let mut meta = BTreeMap::new();
+    let st = SafeTensors::deserialize(&bytes).map_err(|e| ReadError::Format(format!("not a safetensors file: {e}")))?;
+    let (_, header) =
+        SafeTensors::read_metadata(&bytes).map_err(|e| ReadError::Format(format!("not a safetensors file: {e}")))?;
+    let meta = header.metadata().iter().flatten().map(|(k, v)| (k.clone(), v.clone())).collect();
     let mut tensors = Vec::new();
-    for (name, v) in obj {
-        if name == "__metadata__" {
-            for (k, s) in v.as_object().into_iter().flatten() {
-                meta.insert(k.clone(), s.as_str().unwrap_or_default().to_string());
-            }
-            continue;
+    for (name, view) in st.tensors() {
+        if view.dtype() != Dtype::F32 {
+            return Err(ReadError::Format(format!("tensor `{name}` is {}, not F32", view.dtype())));
         }
-        let field = |f: &str| v.get(f).ok_or_else(|| ReadError::Format(format!("tensor `{name}` has no `{f}`")));
-        if field("dtype")?.as_str() != Some("F32") {
-            return Err(ReadError::Format(format!("tensor `{name}` is not F32")));
-        }
-        let shape: Vec<usize> = serde_json::from_value(field("shape")?.clone())
-            .map_err(|e| ReadError::Format(format!("tensor `{name}` shape: {e}")))?;
-        let off: [usize; 2] = serde_json::from_value(field("data_offsets")?.clone())
-            .map_err(|e| ReadError::Format(format!("tensor `{name}` data_offsets: {e}")))?;
-        let count = shape.iter().try_fold(1usize, |a, &d| a.checked_mul(d));
-        if off[0] > off[1] || off[1] > body.len() || count.map(|c| c * 4) != Some(off[1] - off[0]) {
-            return Err(ReadError::Format(format!(
-                "tensor `{name}`: data offsets {off:?} do not fit shape {shape:?} in a body of {} bytes",
-                body.len()
-            )));
-        }
-        let data = body[off[0]..off[1]].chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
-        tensors.push((name.clone(), shape, data));
+        let data = view.data().chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+        tensors.push((name, view.shape().to_vec(), data));
     }
+    tensors.sort_by(|a, b| a.0.cmp(&b.0));
     Ok(TensorFile { tensors, meta })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scratch::Scratch;
+
+    fn scratch(name: &str) -> Scratch {
+        let dir = Scratch::new(&format!("tensorfile_{name}"));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    #[test]
+    fn tensors_and_metadata_round_trip() {
+        let dir = scratch("round_trip");
+        let path = dir.join("state.safetensors");
+        let tensors = vec![
+            ("b.v".to_string(), vec![2, 3], vec![1.0, -2.5, 3.25, f32::MIN_POSITIVE, 0.0, -0.0]),
+            ("a.m".to_string(), vec![1], vec![7.0]),
+            ("empty".to_string(), vec![0, 4], vec![]),
+        ];
+        write(&path, &tensors, &[("step".into(), "42".into()), ("lr".into(), "0.001".into())]).unwrap();
+        assert!(!path.with_extension("tmp").exists());
+        let f = read(&path).unwrap();
+        let mut want = tensors.clone();
+        want.sort_by(|a, b| a.0.cmp(&b.0));
+        // Bit-identical values, -0.0 included.
+        let bits = |t: &[(String, Vec<usize>, Vec<f32>)]| {
+            t.iter()
+                .map(|(n, s, d)| (n.clone(), s.clone(), d.iter().map(|x| x.to_bits()).collect::<Vec<_>>()))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(bits(&f.tensors), bits(&want));
+        assert_eq!(f.meta.get("step").map(String::as_str), Some("42"));
+        assert_eq!(f.meta.get("lr").map(String::as_str), Some("0.001"));
+    }
+
+    /// A file laid out as equiarm's own writer did before this module used the safetensors crate:
+    /// header keys in any order, `__metadata__` first, padded with spaces to 8 bytes.
+    #[test]
+    fn files_of_the_former_writer_still_read() {
+        let dir = scratch("former");
+        let path = dir.join("old.safetensors");
+        let header = r#"{"__metadata__":{"step":"3"},"w.m":{"dtype":"F32","shape":[2],"data_offsets":[0,8]},"w.v":{"dtype":"F32","shape":[2],"data_offsets":[8,16]}}"#;
+        let mut text = header.as_bytes().to_vec();
+        while !text.len().is_multiple_of(8) {
+            text.push(b' ');
+        }
+        let mut bytes = (text.len() as u64).to_le_bytes().to_vec();
+        bytes.extend(&text);
+        for x in [0.5f32, -1.0, 2.0, 4.0] {
+            bytes.extend(x.to_le_bytes());
+        }
+        std::fs::write(&path, bytes).unwrap();
+        let f = read(&path).unwrap();
+        assert_eq!(
+            f.tensors,
+            vec![("w.m".to_string(), vec![2], vec![0.5, -1.0]), ("w.v".to_string(), vec![2], vec![2.0, 4.0])]
+        );
+        assert_eq!(f.meta.get("step").map(String::as_str), Some("3"));
+    }
+
+    #[test]
+    fn bad_files_are_format_errors() {
+        let dir = scratch("bad");
+        let short = dir.join("short.safetensors");
+        std::fs::write(&short, b"abc").unwrap();
+        assert!(matches!(read(&short), Err(ReadError::Format(m)) if m.contains("not a safetensors file")));
+        let truncated = dir.join("truncated.safetensors");
+        write(&truncated, &[("w".into(), vec![4], vec![1.0; 4])], &[]).unwrap();
+        let bytes = std::fs::read(&truncated).unwrap();
+        std::fs::write(&truncated, &bytes[..bytes.len() - 4]).unwrap();
+        assert!(matches!(read(&truncated), Err(ReadError::Format(_))));
+        let f16 = dir.join("f16.safetensors");
+        let view = TensorView::new(Dtype::F16, vec![2], &[0, 60, 0, 60]).unwrap();
+        std::fs::write(&f16, safetensors::serialize([("h", view)], None).unwrap()).unwrap();
+        assert!(matches!(read(&f16), Err(ReadError::Format(m)) if m.contains("`h` is F16")));
+        assert!(matches!(read(&dir.join("missing.safetensors")), Err(ReadError::Io(_))));
+        // A shape that does not match the data is refused when writing.
+        let e = write(&dir.join("w.safetensors"), &[("w".into(), vec![3], vec![1.0; 4])], &[]).unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::InvalidInput);
+    }
 }

@@ -13,6 +13,7 @@ use std::path::PathBuf;
 use std::process::Command;
 use std::time::Instant;
 
+use clap::Parser;
 use equiarm_sim::{Action, Env, EnvConfig, TaskKind, VecEnv};
 
 fn pct(xs: &mut [f64], q: f64) -> f64 {
@@ -68,13 +69,33 @@ fn peer(python: &str, mode: &str, steps: usize) -> Option<(f64, f64, f64, f64)> 
     Some((num("median_ms")?, num("p95_ms")?, num("physics_median_ms")?, num("render_median_ms")?))
 }
 
+/// Env step + 152 px RGBD render per task, beside the PyBullet BulletArm-like peer.
+#[derive(Parser, Debug)]
+#[command(name = "step_render")]
+struct Args {
+    /// Timed steps per task and round (with rendering, and again without).
+    #[arg(long, default_value_t = 300, value_parser = clap::value_parser!(u64).range(1..))]
+    steps: u64,
+    /// Rounds, ours and the peer's interleaved.
+    #[arg(long, default_value_t = 2)]
+    rounds: usize,
+    /// Python interpreter with pybullet that runs `bench/pybullet_peer.py` (no peer without it).
+    #[arg(long, value_name = "PYTHON")]
+    peer: Option<String>,
+    /// Steps per peer mode and round.
+    #[arg(long, default_value_t = 100)]
+    peer_steps: usize,
+    /// Envs of the VecEnv throughput run (block picking, one rayon task per env).
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u64).range(1..))]
+    envs: u64,
+    /// Passed by `cargo bench` to every bench program; ignored.
+    #[arg(long, hide = true)]
+    bench: bool,
+}
+
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let get = |k: &str| args.iter().position(|a| a == k).and_then(|i| args.get(i + 1)).cloned();
-    let steps: usize = get("--steps").and_then(|s| s.parse().ok()).unwrap_or(300);
-    let rounds: usize = get("--rounds").and_then(|s| s.parse().ok()).unwrap_or(2);
-    let python = get("--peer");
-    let peer_steps: usize = get("--peer-steps").and_then(|s| s.parse().ok()).unwrap_or(100);
+    let args = Args::parse();
+    let (steps, rounds, python, peer_steps) = (args.steps as usize, args.rounds, args.peer.clone(), args.peer_steps);
 
     let mut ours: Vec<Vec<f64>> = vec![Vec::new(); TaskKind::ALL.len()];
     let mut phys: Vec<Vec<f64>> = vec![Vec::new(); TaskKind::ALL.len()];
@@ -115,7 +136,7 @@ fn main() {
     println!("{:<16} {:>12.3} {:>10.3}", "all tasks", our_med, pct(&mut all, 0.95));
 
     // Throughput of VecEnv (one rayon task per env), block picking, expert actions, images on.
-    let n_envs = get("--envs").and_then(|s| s.parse().ok()).unwrap_or(8usize);
+    let n_envs = args.envs as usize;
     let mut venv = VecEnv::new(EnvConfig::new(TaskKind::BlockPicking), n_envs).expect("vec env");
     let seeds: Vec<u64> = (0..n_envs as u64).collect();
     let mut obs = venv.reset(&seeds).expect("reset");

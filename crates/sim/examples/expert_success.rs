@@ -2,13 +2,47 @@
 //! Acceptance (issue 3): at least 95 of 100 per task.
 //!
 //! cargo run --release -p equiarm_sim --example expert_success -- [N] [task]
+//!
+//! Environment: `VERBOSE=1` lists the failed seeds, `SUBSTEPS=K` and `DT_HZ=F` override the physics
+//! substeps per step and the substep rate.
 
+use clap::Parser;
 use equiarm_sim::{Env, EnvConfig, TaskKind};
 
+/// Each task's expert planner over seeds 0..N: success counts.
+#[derive(Parser, Debug)]
+#[command(name = "expert_success")]
+struct Args {
+    /// Seeds (episodes) per task.
+    #[arg(default_value_t = 100)]
+    n: u64,
+    /// Only this task (block_pulling, block_pushing, block_picking, drawer_opening, block_in_bowl;
+    /// `all`: every task, the default).
+    #[arg(value_parser = parse_task)]
+    task: Option<Task>,
+}
+
+/// One task, or every task.
+#[derive(Clone, Copy, Debug)]
+enum Task {
+    One(TaskKind),
+    All,
+}
+
+fn parse_task(s: &str) -> Result<Task, String> {
+    if s == "all" {
+        return Ok(Task::All);
+    }
+    TaskKind::from_name(s).map(Task::One).ok_or_else(|| format!("unknown task `{s}`"))
+}
+
 fn main() -> Result<(), equiarm_sim::SimError> {
-    let args: Vec<String> = std::env::args().collect();
-    let n: u64 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(100);
-    let only = args.get(2).and_then(|s| TaskKind::from_name(s));
+    let args = Args::parse();
+    let n = args.n;
+    let only = match args.task {
+        Some(Task::One(t)) => Some(t),
+        Some(Task::All) | None => None,
+    };
     let verbose = std::env::var_os("VERBOSE").is_some();
     println!("task             successes / episodes   mean steps (successes)");
     for task in TaskKind::ALL {

@@ -7,16 +7,56 @@
 
 use std::path::PathBuf;
 
+use clap::Parser;
 use equiarm_sim::snapshot::snapshot_task;
 use equiarm_sim::{EnvConfig, TaskKind, ViewPreset};
 
+/// Colour, depth and segmentation PNGs of a reset scene, per task.
+#[derive(Parser, Debug)]
+#[command(name = "snapshot")]
+struct Args {
+    /// Directory the PNGs are written to.
+    #[arg(default_value = "snapshots")]
+    out_dir: PathBuf,
+    /// Only this task (`all`: every task, the default).
+    #[arg(value_parser = parse_task)]
+    task: Option<Task>,
+    /// Episode seed of the reset.
+    #[arg(default_value_t = 0)]
+    seed: u64,
+    /// Expert steps taken before the snapshot.
+    #[arg(default_value_t = 0)]
+    steps: u32,
+    /// Camera preset (side, angle15 … angle90).
+    #[arg(default_value = "side", value_parser = parse_preset)]
+    preset: ViewPreset,
+}
+
+/// One task, or every task.
+#[derive(Clone, Copy, Debug)]
+enum Task {
+    One(TaskKind),
+    All,
+}
+
+fn parse_task(s: &str) -> Result<Task, String> {
+    if s == "all" {
+        return Ok(Task::All);
+    }
+    TaskKind::from_name(s).map(Task::One).ok_or_else(|| format!("unknown task `{s}`"))
+}
+
+fn parse_preset(s: &str) -> Result<ViewPreset, String> {
+    ViewPreset::from_name(s).ok_or_else(|| format!("unknown camera preset `{s}`"))
+}
+
 fn main() -> Result<(), equiarm_sim::SimError> {
-    let args: Vec<String> = std::env::args().collect();
-    let out = PathBuf::from(args.get(1).map(String::as_str).unwrap_or("snapshots"));
-    let only = args.get(2).and_then(|s| TaskKind::from_name(s));
-    let seed: u64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(0);
-    let steps: u32 = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(0);
-    let preset = args.get(5).and_then(|s| ViewPreset::from_name(s)).unwrap_or(ViewPreset::Side);
+    let args = Args::parse();
+    let (out, seed, steps, preset) = (args.out_dir, args.seed, args.steps, args.preset);
+    let only = match args.task {
+        Some(Task::One(t)) => Some(t),
+        Some(Task::All) | None => None,
+    };
     for task in TaskKind::ALL {
         if only.is_some_and(|t| t != task) {
             continue;
