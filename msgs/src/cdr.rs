@@ -15,19 +15,48 @@ pub const CDR_BE_HEADER: [u8; 4] = [0x00, 0x00, 0x00, 0x00];
 pub enum CdrError {
     /// Fewer than the 4 header bytes.
     #[error("{type_name}: payload of {len} bytes is too short for a CDR encapsulation header")]
-    TooShort { type_name: &'static str, len: usize },
+    TooShort {
+        /// The ROS type being decoded, e.g. `sensor_msgs/msg/Image`.
+        type_name: &'static str,
+        /// Length of the whole payload (header included), bytes.
+        len: usize,
+    },
     /// The representation identifier is not plain CDR (e.g. XCDR2 or a parameter list).
     #[error("{type_name}: unsupported CDR representation {id:02x?} (expected 00 01 CDR_LE or 00 00 CDR_BE)")]
-    Representation { type_name: &'static str, id: [u8; 2] },
+    Representation {
+        /// The ROS type being decoded, e.g. `sensor_msgs/msg/Image`.
+        type_name: &'static str,
+        /// The representation identifier: the first two bytes of the encapsulation header.
+        id: [u8; 2],
+    },
     /// The body does not decode as this type (truncated, wrong layout, invalid bool or UTF-8).
     #[error("{type_name}: {len}-byte payload does not decode: {reason}")]
-    Decode { type_name: &'static str, len: usize, reason: String },
+    Decode {
+        /// The ROS type being decoded, e.g. `sensor_msgs/msg/Image`.
+        type_name: &'static str,
+        /// Length of the whole payload (header included), bytes.
+        len: usize,
+        /// The deserializer's error message.
+        reason: String,
+    },
     /// The body decoded but left bytes over beyond alignment padding: a different (larger) type.
     #[error("{type_name}: {len}-byte payload has {extra} bytes left over after the message (wrong type?)")]
-    Trailing { type_name: &'static str, len: usize, extra: usize },
+    Trailing {
+        /// The ROS type being decoded, e.g. `sensor_msgs/msg/Image`.
+        type_name: &'static str,
+        /// Length of the whole payload (header included), bytes.
+        len: usize,
+        /// Bytes left after the decoded body (more than the 3 accepted as padding).
+        extra: usize,
+    },
     /// The message cannot be encoded (a sequence longer than 2^32 - 1 elements).
     #[error("{type_name}: cannot encode: {reason}")]
-    Encode { type_name: &'static str, reason: String },
+    Encode {
+        /// The ROS type being encoded, e.g. `sensor_msgs/msg/Image`.
+        type_name: &'static str,
+        /// The serializer's error message.
+        reason: String,
+    },
 }
 
 /// Encodes `msg` as little-endian CDR with its encapsulation header.

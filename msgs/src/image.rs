@@ -6,20 +6,35 @@ use crate::{sensor_msgs::Image, std_msgs::Header};
 /// Why an [`Image`] cannot be read as the requested encoding.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
 pub enum ImageError {
+    /// The image's `encoding` is not the one asked for.
     #[error("image encoding is '{found}', expected '{expected}'")]
-    Encoding { expected: &'static str, found: String },
+    Encoding {
+        /// The encoding asked for: `rgb8` or `32FC1`.
+        expected: &'static str,
+        /// The image's `encoding` field.
+        found: String,
+    },
+    /// `step` or the length of `data` does not match `height`, `width` and the encoding's bytes per pixel.
     #[error(
         "{encoding} image of {height}x{width} must have step {expected_step} and {expected_len} data bytes, has step {step} and {len}"
     )]
     Size {
+        /// The encoding checked: `rgb8` (3 bytes per pixel) or `32FC1` (4 bytes per pixel).
         encoding: &'static str,
+        /// The image's height, rows.
         height: u32,
+        /// The image's width, pixels per row.
         width: u32,
+        /// The row length it should have, bytes: width × bytes per pixel.
         expected_step: u64,
+        /// The data length it should have, bytes: `expected_step` × height.
         expected_len: u64,
+        /// The image's `step` field, bytes per row.
         step: u32,
+        /// The length of the image's `data`, bytes.
         len: usize,
     },
+    /// The image has `is_bigendian` set; only little-endian data of the named encoding (`32FC1`) is read.
     #[error("image is big-endian; only little-endian {0} is supported")]
     BigEndian(&'static str),
 }

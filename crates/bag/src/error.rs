@@ -7,31 +7,72 @@ use std::path::PathBuf;
 pub enum BagError {
     /// Reading or writing the file system failed.
     #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        /// The file or directory being read, written, created or renamed.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
     /// rosbag2 never records into an existing directory; neither do we.
     #[error("{path}: already exists and is not empty (a bag is written into a new directory)")]
-    Exists { path: PathBuf },
+    Exists {
+        /// The bag directory, which already has entries.
+        path: PathBuf,
+    },
     /// The path holds no MCAP files.
     #[error("{path}: no MCAP files (expected NAME_0.mcap, NAME_1.mcap, ... or a .mcap file)")]
-    NoFiles { path: PathBuf },
+    NoFiles {
+        /// The directory that was opened as a bag.
+        path: PathBuf,
+    },
     /// The file is empty.
     #[error("{path}: empty file, not an MCAP bag")]
-    Empty { path: PathBuf },
+    Empty {
+        /// The zero-length file.
+        path: PathBuf,
+    },
     /// The file does not start with the MCAP magic bytes.
     #[error("{path}: not an MCAP file (no MCAP magic at the start)")]
-    NotMcap { path: PathBuf },
+    NotMcap {
+        /// The file without the magic.
+        path: PathBuf,
+    },
     /// The file ends before its footer (a recorder that was killed) and the read was strict.
     #[error("{path}: truncated after {messages} readable messages ({reason}); `equiarm bag recover` rewrites it whole")]
-    Truncated { path: PathBuf, messages: u64, reason: String },
+    Truncated {
+        /// The truncated MCAP file.
+        path: PathBuf,
+        /// Messages read from this file before it ended.
+        messages: u64,
+        /// Why the read stopped: the MCAP reader's error, or `no footer or end magic`.
+        reason: String,
+    },
     /// The MCAP structure is damaged.
     #[error("{path}: damaged MCAP data after {messages} messages: {source}")]
-    Mcap { path: PathBuf, messages: u64, source: mcap::McapError },
+    Mcap {
+        /// The damaged MCAP file.
+        path: PathBuf,
+        /// Messages read from this file before the damage (0 if it could not be opened as a stream).
+        messages: u64,
+        /// The MCAP reader's error.
+        source: mcap::McapError,
+    },
     /// Writing MCAP records failed.
     #[error("{path}: writing MCAP: {source}")]
-    Write { path: PathBuf, source: mcap::McapError },
+    Write {
+        /// The MCAP file being written.
+        path: PathBuf,
+        /// The MCAP writer's error.
+        source: mcap::McapError,
+    },
     /// A message refers to a topic id this writer never handed out, or similar misuse.
     #[error("{path}: {what}")]
-    Usage { path: PathBuf, what: String },
+    Usage {
+        /// The bag directory.
+        path: PathBuf,
+        /// What was misused, e.g. `unknown topic id 3` or `bag is finished`.
+        what: String,
+    },
 }
 
 impl BagError {

@@ -20,15 +20,22 @@ use crate::error::{Result, SimError};
 /// The asset files the simulator knows.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum AssetKind {
+    /// `gripper.urdf`: the floating parallel-jaw gripper, a palm with two prismatic fingers.
     Gripper,
+    /// `cube.urdf`: the 0.05 m, 0.1 kg red cube of pushing, picking and block in bowl.
     Cube,
+    /// `flat_block.urdf`: the 0.08 × 0.08 × 0.05 m, 0.5 kg blue block of pulling (two per episode).
     FlatBlock,
+    /// `table.urdf`: the 1.2 × 1.2 m ground slab with its top face at z = 0.
     Table,
+    /// `drawer.urdf`: the cabinet with a drawer on a prismatic joint and a handle fixed to it.
     Drawer,
+    /// `bowl.urdf`: the box-built bowl of block in bowl (rim about 0.155 m across, 0.063 m tall).
     Bowl,
 }
 
 impl AssetKind {
+    /// Every asset kind, each once.
     pub const ALL: [AssetKind; 6] = [
         AssetKind::Gripper,
         AssetKind::Cube,
@@ -67,6 +74,7 @@ impl AssetKind {
 pub struct Asset {
     /// Where it came from (for error messages).
     pub file: String,
+    /// The parsed URDF: links, joints and robot-level materials.
     pub robot: urdf_rs::Robot,
     /// Linear RGB colour in [0, 1] of each URDF link, indexed like `robot.links`.
     pub link_colors: Vec<[f32; 3]>,
@@ -134,6 +142,7 @@ impl Assets {
         Ok(a)
     }
 
+    /// The asset of `kind` (every kind is present).
     pub fn get(&self, kind: AssetKind) -> &Asset {
         // Construction inserts every kind, so this lookup cannot fail.
         &self.assets[&kind]

@@ -22,14 +22,20 @@ pub enum ViewPreset {
     Side,
     /// `camera_side_rgbd_{15,30,45,60,75,90}`: eye = (0.45 + 0.81 cos a, 0, 0.81 sin a).
     Angle15,
+    /// `camera_side_rgbd_30`: elevation 30°, distance 0.81 m.
     Angle30,
+    /// `camera_side_rgbd_45`: elevation 45°, distance 0.81 m (close to, not the same as, [`ViewPreset::Side`]).
     Angle45,
+    /// `camera_side_rgbd_60`: elevation 60°, distance 0.81 m.
     Angle60,
+    /// `camera_side_rgbd_75`: elevation 75°, distance 0.81 m.
     Angle75,
+    /// `camera_side_rgbd_90`: looking straight down from 0.81 m above the target (top-down view).
     Angle90,
 }
 
 impl ViewPreset {
+    /// Every preset: [`ViewPreset::Side`], then the view angles from 15° to 90°.
     pub const ALL: [ViewPreset; 7] = [
         ViewPreset::Side,
         ViewPreset::Angle15,
@@ -40,6 +46,7 @@ impl ViewPreset {
         ViewPreset::Angle90,
     ];
 
+    /// The preset's name on the command line and in configs: `side`, `angle15` … `angle90`.
     pub fn name(self) -> &'static str {
         match self {
             ViewPreset::Side => "side",
@@ -52,10 +59,13 @@ impl ViewPreset {
         }
     }
 
+    /// The preset called `name` (as [`ViewPreset::name`] spells it), or `None`.
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|p| p.name() == name)
     }
 
+    /// The camera configuration of the preset. The angle presets change only the elevation and the
+    /// distance (0.81 m) of [`CameraConfig::default`]: same target, field of view, size and clipping.
     pub fn config(self) -> CameraConfig {
         let base = CameraConfig::default();
         let angle = |deg: f64| CameraConfig { elevation_deg: deg, distance: 0.81, ..base.clone() };
@@ -83,10 +93,13 @@ pub struct CameraConfig {
     pub distance: f64,
     /// Vertical field of view, degrees.
     pub fov_y_deg: f64,
+    /// Image width, pixels, in 1..=8192 (152 in the paper).
     pub width: usize,
+    /// Image height, pixels, in 1..=8192 (152 in the paper).
     pub height: usize,
     /// Near and far clipping distances (planar depth), m. Background pixels get depth `far`.
     pub near: f64,
+    /// Far clipping distance (planar depth), m, greater than `near`; also the depth of background pixels.
     pub far: f64,
 }
 
@@ -110,22 +123,34 @@ impl Default for CameraConfig {
 /// The fields of `sensor_msgs/CameraInfo` (without header and ROI).
 #[derive(Clone, Debug, PartialEq)]
 pub struct CameraInfoData {
+    /// Image width, pixels.
     pub width: u32,
+    /// Image height, pixels.
     pub height: u32,
+    /// Distortion model: always `plumb_bob`.
     pub distortion_model: &'static str,
+    /// Distortion coefficients (k1, k2, t1, t2, k3): all zero (no lens distortion).
     pub d: [f64; 5],
+    /// Intrinsic matrix, row-major 3×3 ([`Camera::camera_info_k`]).
     pub k: [f64; 9],
+    /// Rectification matrix, row-major 3×3: the identity (monocular).
     pub r: [f64; 9],
+    /// Projection matrix, row-major 3×4 ([`Camera::camera_info_p`]).
     pub p: [f64; 12],
 }
 
 /// A validated camera: intrinsics and extrinsics.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {
+    /// The configuration it was built from.
     pub config: CameraConfig,
+    /// Focal length along image columns (u), pixels; equal to `fy` (square pixels).
     pub fx: f64,
+    /// Focal length along image rows (v), pixels: (height / 2) / tan(fov_y / 2).
     pub fy: f64,
+    /// Principal point, column coordinate u, pixels: (width − 1) / 2.
     pub cx: f64,
+    /// Principal point, row coordinate v, pixels: (height − 1) / 2.
     pub cy: f64,
     /// Eye position in the world.
     pub eye: Point3<f64>,
@@ -134,6 +159,9 @@ pub struct Camera {
 }
 
 impl Camera {
+    /// Validates `config` and computes the intrinsics and the pose. A value out of its domain is a
+    /// [`SimError::Config`] naming the field: elevation in (0, 90]°, distance > 0, field of view in
+    /// (1, 170)°, width and height in 1..=8192, 0 < near < far, finite target.
     pub fn new(config: CameraConfig) -> Result<Self> {
         let c = &config;
         let bad = |field: &'static str, message: String| Err(SimError::Config { field, message });
@@ -181,10 +209,12 @@ impl Camera {
         })
     }
 
+    /// Image width, pixels.
     pub fn width(&self) -> usize {
         self.config.width
     }
 
+    /// Image height, pixels.
     pub fn height(&self) -> usize {
         self.config.height
     }

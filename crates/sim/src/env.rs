@@ -43,9 +43,13 @@ pub struct Corruption {
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct EnvConfig {
+    /// The task: its objects, success test and expert planner.
     pub task: TaskKind,
+    /// The camera (default: the paper's oblique `camera_side_rgbd` view, 152 × 152 pixels).
     pub camera: CameraConfig,
+    /// Physics settings.
     pub params: SimParams,
+    /// Symmetry corruptions of the observations (default: none).
     pub corruption: Corruption,
     /// Episode length limit (50 for every task in the paper).
     pub max_steps: u32,
@@ -60,6 +64,8 @@ impl Default for EnvConfig {
 }
 
 impl EnvConfig {
+    /// The paper's setup of `task`: default camera and physics, no corruption, 50 steps per episode,
+    /// images rendered.
     pub fn new(task: TaskKind) -> Self {
         Self {
             task,
@@ -77,7 +83,9 @@ impl EnvConfig {
 pub struct Observation {
     /// Steps taken in this episode.
     pub step: u32,
+    /// Image width, pixels (0 if rendering is off).
     pub width: usize,
+    /// Image height, pixels (0 if rendering is off).
     pub height: usize,
     /// rgb8, H×W×3, row-major (empty if rendering is off).
     pub color: Vec<u8>,
@@ -91,6 +99,7 @@ pub struct Observation {
     pub open_ratio: f32,
     /// TCP position (m) and yaw (rad).
     pub tcp: [f32; 3],
+    /// Gripper yaw about world z, rad, as commanded: neither wrapped nor clipped (0 at reset).
     pub yaw: f32,
     /// The expert planner's action for this state, in physical units.
     pub expert_action: Action,
@@ -99,6 +108,7 @@ pub struct Observation {
 /// Extra information from a step.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct StepInfo {
+    /// The task's success test holds after this step: reward 1, the episode ends.
     pub success: bool,
     /// An object left the workspace: the episode ends with reward 0.
     pub invalid: bool,
@@ -109,9 +119,13 @@ pub struct StepInfo {
 /// The result of [`Env::step`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct StepResult {
+    /// The observation after the step (the terminal one when `done`).
     pub observation: Observation,
+    /// 1.0 when the task's success test holds after the step, else 0.0 (sparse).
     pub reward: f32,
+    /// The episode ended: success, an invalid state or the step limit (`info` says which).
     pub done: bool,
+    /// Why the episode ended, if it did.
     pub info: StepInfo,
 }
 
@@ -150,10 +164,12 @@ impl Env {
         Ok(Self { config, camera, assets, episode: None })
     }
 
+    /// The configuration the env was built with.
     pub fn config(&self) -> &EnvConfig {
         &self.config
     }
 
+    /// The validated camera (intrinsics, pose, `CameraInfo`) the observations are rendered with.
     pub fn camera(&self) -> &Camera {
         &self.camera
     }
@@ -296,6 +312,7 @@ impl Env {
 
 /// Many envs stepped in parallel (one rayon task per env).
 pub struct VecEnv {
+    /// The envs; [`VecEnv::reset`] and [`VecEnv::step`] give env k the k-th seed or action.
     pub envs: Vec<Env>,
 }
 

@@ -33,14 +33,20 @@ pub const MAX_DROT: f32 = std::f32::consts::FRAC_PI_4;
 /// (0 closed, 1 open), TCP position deltas in metres, yaw delta in radians.
 #[derive(Clone, Copy, Debug, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Action {
+    /// Target jaw opening p: 0 closed, 1 open to the full finger travel; clipped to [0, 1].
     pub open_ratio: f32,
+    /// TCP displacement along world x, m, clipped to ±[`MAX_DPOS`] (0.05 m).
     pub dx: f32,
+    /// TCP displacement along world y, m, clipped to ±[`MAX_DPOS`] (0.05 m).
     pub dy: f32,
+    /// TCP displacement along world z, m, clipped to ±[`MAX_DPOS`] (0.05 m).
     pub dz: f32,
+    /// Yaw change about world z, rad, clipped to ±[`MAX_DROT`] (π/4).
     pub dtheta: f32,
 }
 
 impl Action {
+    /// An action from its components, as given (clipping happens in [`Action::clipped`] and when it is applied).
     pub fn new(open_ratio: f32, dx: f32, dy: f32, dz: f32, dtheta: f32) -> Self {
         Self { open_ratio, dx, dy, dz, dtheta }
     }
@@ -50,6 +56,8 @@ impl Action {
         [self.open_ratio, self.dx, self.dy, self.dz, self.dtheta]
     }
 
+    /// Whether all five components are finite (no NaN or ±inf); [`Env::step`](crate::Env::step) rejects the
+    /// other actions.
     pub fn is_finite(&self) -> bool {
         self.to_array().iter().all(|x| x.is_finite())
     }
@@ -82,9 +90,13 @@ impl Action {
 /// Handles and commanded state of the gripper in one scene.
 #[derive(Clone, Debug)]
 pub struct Gripper {
+    /// The palm's rigid body (kinematic, position-based: moved by the simulator each physics step).
     pub palm: RigidBodyHandle,
+    /// The finger bodies, [left, right] (dynamic).
     pub fingers: [RigidBodyHandle; 2],
+    /// The first collider of each finger, [left, right]: their contacts decide what is held.
     pub finger_colliders: [ColliderHandle; 2],
+    /// The prismatic palm–finger joints, [left, right], each driven by a position motor.
     pub finger_joints: [ImpulseJointHandle; 2],
     /// Commanded TCP position (the palm is kinematic, so this is where it is after a step).
     pub tcp: Vector,

@@ -18,7 +18,7 @@
 //!
 //! Modules: [`assets`] (URDF files), [`world`] (rapier settings, scene), [`gripper`] (floating
 //! gripper, action semantics, holding), [`camera`] (intrinsics/extrinsics, presets), [`render`]
-//! (rasteriser + ray-cast oracle), [`tasks`] (tasks and expert planners), [`env`] (Env / VecEnv),
+//! (rasteriser + ray-cast oracle), [`tasks`] (tasks and expert planners), [`env`](mod@env) (Env / VecEnv),
 //! [`corrupt`] (symmetry corruptions), [`snapshot`] (PNG output).
 //!
 //! Limitations: the gripper floats (no arm, no IK); the bowl is built from boxes; determinism holds

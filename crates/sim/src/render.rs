@@ -26,7 +26,9 @@ use crate::world::Scene;
 /// One rendered image set. All buffers are row-major, `height` rows of `width` pixels.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Frame {
+    /// Image width, pixels.
     pub width: usize,
+    /// Image height, pixels.
     pub height: usize,
     /// rgb8, `height × width × 3`.
     pub color: Vec<u8>,
@@ -37,6 +39,7 @@ pub struct Frame {
 }
 
 impl Frame {
+    /// A blank `width`×`height` frame: black colour, every depth `far` (m), segmentation 0 (background).
     pub fn new(width: usize, height: usize, far: f32) -> Self {
         let n = width * height;
         Self { width, height, color: vec![0; n * 3], depth: vec![far; n], segmentation: vec![0; n] }
@@ -122,6 +125,8 @@ struct MeshItem {
 }
 
 impl MeshCache {
+    /// Tessellates every collider of `scene.visuals` (cuboids, cylinders, balls, capsules, convex
+    /// polyhedra; other shapes are not drawn). Valid for that scene only.
     pub fn new(scene: &Scene) -> Self {
         let mut items = Vec::new();
         for v in &scene.visuals {
@@ -159,6 +164,7 @@ impl MeshCache {
         Self { items }
     }
 
+    /// Total number of triangles over all cached colliders.
     pub fn triangle_count(&self) -> usize {
         self.items.iter().map(|i| i.triangles.len()).sum()
     }

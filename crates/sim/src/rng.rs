@@ -9,10 +9,12 @@ pub struct Rng {
 }
 
 impl Rng {
+    /// A generator seeded with `seed`; equal seeds give equal streams.
     pub fn new(seed: u64) -> Self {
         Self { state: seed ^ 0x5851_f42d_4c95_7f2d }
     }
 
+    /// The next 64 uniformly distributed random bits; advances the state.
     pub fn next_u64(&mut self) -> u64 {
         self.state = self.state.wrapping_add(0x9e37_79b9_7f4a_7c15);
         let mut z = self.state;

@@ -10,8 +10,11 @@ use crate::render::Frame;
 /// Paths of the three files written by [`write_pngs`].
 #[derive(Clone, Debug)]
 pub struct SnapshotFiles {
+    /// `<prefix>_color.png`: the colour image, 8-bit RGB.
     pub color: PathBuf,
+    /// `<prefix>_depth.png`: planar depth as 16-bit grey in millimetres (clamped to 0..=65535).
     pub depth: PathBuf,
+    /// `<prefix>_seg.png`: the segmentation ids in false colour ([`seg_color`]), 8-bit RGB.
     pub segmentation: PathBuf,
 }
 

@@ -27,14 +27,21 @@ use crate::world::{Scene, yaw_of};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TaskKind {
+    /// Pull one flat block into the other: success when the two blocks are within 2 mm of each other.
     BlockPulling,
+    /// Push the cube onto the goal square: success when their centres are closer than 0.05 m in xy.
     BlockPushing,
+    /// Pick the cube up: success when it is held and the TCP is higher than 0.15 m.
     BlockPicking,
+    /// Open the drawer: success when it is pulled out of the cabinet by more than 0.15 m.
     DrawerOpening,
+    /// Put the cube into the bowl: success when the cube touches the bowl within 0.03 m of its centre in xy
+    /// and the bowl is tilted less than 20°.
     BlockInBowl,
 }
 
 impl TaskKind {
+    /// Every task, in the order of docs/paper.md §3.3.
     pub const ALL: [TaskKind; 5] = [
         TaskKind::BlockPulling,
         TaskKind::BlockPushing,
@@ -70,9 +77,10 @@ const GOAL_SIDE: f32 = 22.0 * 0.6 / 152.0;
 /// Per-episode task state: the task's bodies and the planner's waypoint index.
 #[derive(Clone, Debug)]
 pub struct TaskState {
+    /// The task: selects the meaning of `bodies`, the success and validity tests and the planner.
     pub kind: TaskKind,
-    /// pulling: [block 1 (moved), block 2]; pushing, picking: [cube]; drawer: [cabinet, drawer, handle];
-    /// bowl: [cube, bowl].
+    /// pulling: `[block 1 (moved), block 2]`; pushing, picking: `[cube]`; drawer: `[cabinet, drawer,
+    /// handle]`; bowl: `[cube, bowl]`.
     pub bodies: Vec<RigidBodyHandle>,
     /// Pushing goal centre (xy).
     pub goal: Option<[f32; 2]>,

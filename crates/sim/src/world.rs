@@ -32,6 +32,7 @@ pub struct SimParams {
     pub grip_substeps: u32,
     /// Physics steps run at reset so spawned objects settle (BulletArm: 50 steps at 1/240 s).
     pub reset_settle_substeps: u32,
+    /// Constraint solver iterations per physics step (rapier's `num_solver_iterations`), >= 1.
     pub solver_iterations: usize,
     /// Contact prediction distance, m (rapier's default is 0.02). NOTE: rapier applies speculative
     /// contact impulses within this distance; at 0.02 a cube carried 1 cm above the bowl rim dragged the
@@ -41,15 +42,22 @@ pub struct SimParams {
     /// fingers sink 1-1.3 cm into a light cube and misaligned grasps fail; 240 Hz, ζ = 1 keeps the
     /// penetration near 0.5 mm.
     pub contact_softness_hz: f32,
+    /// Damping ratio ζ of the contact spring whose natural frequency is `contact_softness_hz`
+    /// (dimensionless, > 0).
     pub contact_damping_ratio: f32,
     /// Gravity magnitude (along -z), m/s². BulletArm uses 10.
     pub gravity: f32,
+    /// Friction coefficient of the gripper's colliders (fingers and palm), >= 0.
     pub finger_friction: f32,
+    /// Friction coefficient of the task objects (blocks, cube, bowl, drawer cabinet, tray and handle), >= 0.
     pub object_friction: f32,
+    /// Friction coefficient of the table, >= 0.
     pub table_friction: f32,
     /// Finger position motor: stiffness N/m, damping N·s/m, force limit N.
     pub grip_stiffness: f32,
+    /// Damping of each finger's position motor, N·s/m, >= 0.
     pub grip_damping: f32,
+    /// Force limit of each finger's position motor, N, > 0.
     pub grip_max_force: f32,
     /// Force that holds the drawer shut (a velocity-0 motor with this force limit), N.
     pub drawer_resistance: f32,
@@ -80,6 +88,10 @@ impl Default for SimParams {
 }
 
 impl SimParams {
+    /// Checks the domains: `dt`, `prediction_distance`, `contact_softness_hz`, `contact_damping_ratio`,
+    /// `grip_stiffness` and `grip_max_force` finite and > 0; gravity, frictions, `grip_damping` and
+    /// `drawer_resistance` finite and >= 0; `substeps` and `solver_iterations` >= 1. The first value out of
+    /// its domain is a [`SimError::Config`] naming the field.
     pub fn validate(&self) -> Result<()> {
         let pos = |field: &'static str, v: f32| {
             if v.is_finite() && v > 0.0 {
@@ -119,9 +131,11 @@ impl SimParams {
 /// What the renderers know about one collider.
 #[derive(Clone, Debug)]
 pub struct Visual {
+    /// The collider drawn; its shape and pose are read from the physics world at render time.
     pub collider: ColliderHandle,
     /// Segmentation id: one per rigid body, 1-based (0 is background).
     pub seg: u16,
+    /// Colour, RGB in [0, 1]: the link's URDF material (with `checker`, the colour of the even tiles).
     pub color: [f32; 3],
     /// Painted with a checkerboard in world xy (the table top, when enabled).
     pub checker: bool,
@@ -129,10 +143,13 @@ pub struct Visual {
 
 /// A rapier world plus the render registry.
 pub struct Scene {
+    /// The rapier world (bodies, colliders, joints, contacts), z up, gravity along −z.
     pub physics: PhysicsWorld,
+    /// One entry per visible collider, in insertion order: what the renderers draw.
     pub visuals: Vec<Visual>,
     /// Name of each segmentation id (index = id; index 0 is "background").
     pub seg_names: Vec<String>,
+    /// The physics settings the world was built with; the gripper and tasks read theirs from here.
     pub params: SimParams,
 }
 
