@@ -1,6 +1,7 @@
-//! Ordinary (non-equivariant) layers for the CNN and SEN baselines, with the authors'
-//! initialisation (xavier-uniform weights, zero bias, docs/paper.md §1.8) drawn from our own seeded
-//! RNG, so that they are reproducible like the equivariant ones.
+//! Ordinary (non-equivariant) layers for the CNN and SEN baselines, with the authors' initialisation
+//! (their `weights_init`, docs/paper.md §1.8: a conv gets xavier-normal weights and keeps PyTorch's
+//! default bias, U(±1/√fan_in); a linear layer gets xavier-uniform weights and a zero bias) drawn
+//! from our own seeded RNG, so that they are reproducible like the equivariant ones.
 
 use crate::init::Init;
 use burn::module::{Module, Param};
@@ -19,11 +20,13 @@ pub struct Conv {
 impl Conv {
     /// A `k×k` conv `cin → cout` with padding `padding`, weights for parameter path `path`.
     pub fn new(path: &str, cin: usize, cout: usize, k: usize, padding: usize, init: &Init, device: &Device) -> Self {
-        let bound = (6.0 / ((cin + cout) * k * k) as f64).sqrt();
-        let w = init.uniform(&format!("{path}.weight"), cout * cin * k * k, bound);
+        let (fan_in, fan_out) = (cin * k * k, cout * k * k);
+        let std = (2.0 / (fan_in + fan_out) as f64).sqrt();
+        let w = init.normal(&format!("{path}.weight"), cout * cin * k * k, std);
+        let b = init.uniform(&format!("{path}.bias"), cout, 1.0 / (fan_in as f64).sqrt());
         Conv {
             weight: Param::from_tensor(Tensor::from_data(TensorData::new(w, [cout, cin, k, k]), device)),
-            bias: Param::from_tensor(Tensor::zeros([cout], device)),
+            bias: Param::from_tensor(Tensor::from_data(TensorData::new(b, [cout]), device)),
             padding,
         }
     }
@@ -62,5 +65,45 @@ impl Linear {
     /// `[B, in] → [B, out]`.
     pub fn forward(&self, x: Tensor<2>) -> Tensor<2> {
         x.matmul(self.weight.val().transpose()) + self.bias.val().unsqueeze::<2>()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+        t.into_data().try_to_vec::<f32>().expect("f32 tensor")
+    }
+
+    #[test]
+    fn conv_init_is_xavier_normal_with_pytorchs_default_bias() {
+        let dev = Device::flex();
+        let (cin, cout, k) = (64, 128, 3);
+        let conv = Conv::new("c", cin, cout, k, 1, &Init::new(0), &dev);
+        let w = values(conv.weight.val());
+        let n = w.len() as f64;
+        let mean = w.iter().map(|&x| x as f64).sum::<f64>() / n;
+        let std = (w.iter().map(|&x| (x as f64 - mean).powi(2)).sum::<f64>() / n).sqrt();
+        let expected = (2.0 / ((cin + cout) * k * k) as f64).sqrt();
+        assert!(mean.abs() < 0.02 * expected, "mean {mean}");
+        assert!((std / expected - 1.0).abs() < 0.02, "std {std}, xavier-normal {expected}");
+        // A normal, not a uniform: some weights lie beyond the xavier-uniform bound √3·std.
+        assert!(w.iter().any(|&x| (x as f64).abs() > 3f64.sqrt() * expected));
+        let b = values(conv.bias.val());
+        let bound = 1.0 / ((cin * k * k) as f64).sqrt();
+        assert!(b.iter().all(|&x| (x as f64).abs() <= bound), "bias beyond ±1/√fan_in");
+        assert!(b.iter().filter(|&&x| x != 0.0).count() == b.len(), "bias left at zero");
+    }
+
+    #[test]
+    fn linear_init_is_xavier_uniform_with_zero_bias() {
+        let dev = Device::flex();
+        let lin = Linear::new("l", 256, 10, &Init::new(0), &dev);
+        let bound = (6.0 / 266f64).sqrt() as f32;
+        let w = values(lin.weight.val());
+        assert!(w.iter().all(|x| x.abs() <= bound));
+        assert!(w.iter().any(|x| x.abs() > 0.9 * bound), "spread over the whole interval");
+        assert!(values(lin.bias.val()).iter().all(|&x| x == 0.0));
     }
 }
