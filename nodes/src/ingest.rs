@@ -143,3 +143,107 @@ impl Ingest {
         }
     }
 }
+
+/// How many updates the trainer owes, as the paper's loop makes them: one per `num_envs` training
+/// transitions (one vector step of the envs), counted once the replay holds `training_starts` rows.
+///
+/// Expert demonstrations are held until their episode's result, so they can be what brings the
+/// replay to `training_starts` although the transitions that carried them owed nothing. Then one
+/// update is owed at the release: the policies, held by `--max-lead` until the trainer updates, may
+/// send no more transitions, and without it the run would wait for the idle timeout.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct UpdateDebt {
+    num_envs: usize,
+    training_starts: usize,
+    since: usize,
+    owed: u64,
+}
+
+impl UpdateDebt {
+    /// No update owed yet; `training_starts` below 1 counts as 1.
+    pub fn new(num_envs: usize, training_starts: usize) -> Self {
+        Self { num_envs: num_envs.max(1), training_starts: training_starts.max(1), since: 0, owed: 0 }
+    }
+
+    /// Whether `stored` rows (replay and queue) are enough to train.
+    pub fn ready(&self, stored: usize) -> bool {
+        stored >= self.training_starts
+    }
+
+    /// A training env's transition was ingested; `stored` rows are held now (replay and queue).
+    pub fn transition(&mut self, stored: usize) {
+        self.since += 1;
+        if self.since >= self.num_envs {
+            self.since = 0;
+            self.owed += self.ready(stored) as u64;
+        }
+    }
+
+    /// An episode result was ingested, taking the stored rows from `before` to `after` (the demos it
+    /// released, if any).
+    pub fn episode(&mut self, before: usize, after: usize) {
+        if !self.ready(before) && self.ready(after) && self.owed == 0 {
+            self.owed = 1;
+        }
+    }
+
+    /// Updates owed now.
+    pub fn owed(&self) -> u64 {
+        self.owed
+    }
+
+    /// One owed update is being made; false if none was owed.
+    pub fn pay(&mut self) -> bool {
+        let some = self.owed > 0;
+        self.owed = self.owed.saturating_sub(1);
+        some
+    }
+}
+
+#[cfg(test)]
+mod debt_tests {
+    use super::UpdateDebt;
+
+    #[test]
+    fn one_update_per_vector_step_once_the_replay_is_ready() {
+        let mut d = UpdateDebt::new(2, 4);
+        for stored in 1..=3 {
+            d.transition(stored);
+        }
+        assert_eq!(d.owed(), 0, "not ready before 4 rows");
+        d.transition(4); // the 2nd of the 2nd vector step: ready
+        d.transition(5);
+        d.transition(6);
+        assert_eq!(d.owed(), 2);
+        assert!(d.pay() && d.pay() && !d.pay());
+        assert_eq!(d.owed(), 0);
+    }
+
+    #[test]
+    fn demos_released_by_a_result_owe_one_update_even_after_the_learned_steps_came_first() {
+        // One env, 5 held demo transitions and then the policy's one allowed learned step (max-lead
+        // 1), all ingested before the episode's result: none of them found the replay ready.
+        let mut d = UpdateDebt::new(1, 5);
+        for _ in 0..6 {
+            d.transition(0);
+        }
+        assert_eq!(d.owed(), 0);
+        // The result releases the 5 demos (and the learned row was queued too): one update is owed,
+        // else the policy, held until the trainer updates, and the trainer would wait for each other.
+        d.episode(1, 6);
+        assert_eq!(d.owed(), 1);
+        // Results that release nothing, or that find the replay ready already, owe nothing more.
+        d.episode(6, 6);
+        d.episode(6, 11);
+        assert_eq!(d.owed(), 1);
+    }
+
+    #[test]
+    fn a_release_owes_nothing_extra_when_updates_are_owed_already() {
+        let mut d = UpdateDebt::new(1, 2);
+        d.transition(3);
+        assert_eq!(d.owed(), 1);
+        d.episode(1, 3);
+        assert_eq!(d.owed(), 1);
+    }
+}

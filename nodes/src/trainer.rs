@@ -46,7 +46,7 @@ use log::{info, warn};
 use serde::{Deserialize, Serialize};
 use tokio::task::JoinHandle;
 
-use crate::ingest::Ingest;
+use crate::ingest::{Ingest, UpdateDebt};
 use crate::lockstep::{Item, Lockstep};
 use crate::ros::{RosNode, RosOptions, Subscriber, qos};
 use crate::train_cli::{TrainArgs, stop_flag};
@@ -195,8 +195,8 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     // messages refused.
     let mut lockstep = args.deterministic.then(|| Lockstep::new(cfg.num_envs));
     let (mut last_round, mut stall_logged, mut refused) = (Instant::now(), None::<u64>, 0u64);
-    let (mut owed, mut since, mut pending_eval, mut queue) =
-        (0u64, 0usize, Vec::<EpisodeResult>::new(), Vec::<Stored>::new());
+    let (mut debt, mut pending_eval, mut queue) =
+        (UpdateDebt::new(cfg.num_envs, cfg.training_starts), Vec::<EpisodeResult>::new(), Vec::<Stored>::new());
     // The learner is None while an update runs; `known` is (updates, replay len, expert len, last metrics).
     let mut known = (learner.updates(), learner.replay().len(), learner.replay().expert_len(), Metrics::default());
     let (mut home, mut task): (Option<Learner>, Option<Update>) = (Some(learner), None);
@@ -239,9 +239,9 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
             };
             stopping = why.map(|w| (w, Instant::now() + Duration::from_secs(2)));
         }
-        let ready = known.1 + queue.len() >= cfg.training_starts.max(1);
+        let ready = debt.ready(known.1 + queue.len());
         let round_ready = lockstep.as_ref().is_some_and(Lockstep::ready);
-        let work = home.is_some() && stopping.is_none() && ((owed > 0 && ready) || round_ready);
+        let work = home.is_some() && stopping.is_none() && ((debt.owed() > 0 && ready) || round_ready);
         let mut got = Vec::new();
         while let Some((t, _)) = tr_sub.recv_timeout(Duration::ZERO).await? {
             got.push(Ok(t));
@@ -278,11 +278,7 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
                     ingest_transition(&mut ingest, &t, &mut queue, &mut bad_logged);
                     if !ingest.is_eval(&t.obs.env) {
                         st.global_step += 1;
-                        since += 1;
-                        if since >= cfg.num_envs {
-                            since = 0;
-                            owed += (known.1 + queue.len() >= cfg.training_starts.max(1)) as u64;
-                        }
+                        debt.transition(known.1 + queue.len());
                     }
                 }
                 // Evaluations as in the paper: the eval pair's episodes that end once the update
@@ -315,16 +311,9 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
                 Err(r) => match lockstep.as_mut() {
                     Some(ls) => log_refused(ls.episode(r), &mut refused),
                     None => {
-                        let starts = cfg.training_starts.max(1);
                         let before = known.1 + queue.len();
                         ingest_episode(&mut ingest, &r, &mut queue, &mut metrics, st.global_step, wall(&started))?;
-                        // Demos released by this result can be what brings the replay to
-                        // `training_starts`. The transitions that came before owed no update, and
-                        // the policies, held by `--max-lead` until the trainer updates, may send no
-                        // more: one update is owed then, or the run would wait for the idle timeout.
-                        if before < starts && known.1 + queue.len() >= starts && owed == 0 {
-                            owed = 1;
-                        }
+                        debt.episode(before, known.1 + queue.len());
                     }
                 },
             }
@@ -347,7 +336,7 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
                 last_ck = Some(checkpoint(&learner, &st, &dir)?);
             }
             if let Some(p) = progress.as_mut() {
-                let (name, n) = lockstep.as_ref().map_or(("owed", owed), |l| ("rounds", l.rounds()));
+                let (name, n) = lockstep.as_ref().map_or(("owed", debt.owed()), |l| ("rounds", l.rounds()));
                 p.update(
                     u,
                     &[
@@ -398,11 +387,11 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
             known = (learner.updates(), learner.replay().len(), learner.replay().expert_len(), known.3);
             if lockstep.is_none()
                 && stopping.is_none()
-                && owed > 0
+                && debt.owed() > 0
                 && learner.ready()
                 && learner.updates() < cfg.total_updates
             {
-                owed -= 1;
+                debt.pay();
                 update = true;
             }
             if update {
