@@ -81,22 +81,22 @@ struct RecordArgs {
     #[arg(short, long)]
     all: bool,
     /// With --all: how often to look for new topics, in ms (as rosbag2's --polling-interval).
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = 100, value_parser = equiarm_nodes::cli_values::millis)]
     polling_interval_ms: u64,
     /// Chunk compression.
     #[arg(long, value_enum, default_value = "zstd")]
     compression: CompressionArg,
     /// Start a new file after this many MB of messages.
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
     split_size_mb: Option<u64>,
     /// Start a new file after this many seconds.
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=2_592_000))]
     split_duration_s: Option<u64>,
     /// Flush interval in ms: a killed recorder loses at most about this much.
-    #[arg(long, default_value_t = 250)]
+    #[arg(long, default_value_t = 250, value_parser = equiarm_nodes::cli_values::millis)]
     flush_ms: u64,
     /// Stop after this many seconds (default: until Ctrl-C / SIGTERM).
-    #[arg(long)]
+    #[arg(long, value_parser = equiarm_nodes::cli_values::seconds)]
     duration_s: Option<f64>,
     /// No live status line.
     #[arg(long, short)]
@@ -180,18 +180,18 @@ enum BagCommand {
         /// Bag directory or .mcap file.
         bag: std::path::PathBuf,
         /// Speed factor (2 = twice as fast; 0 = as fast as possible).
-        #[arg(long, default_value_t = 1.0)]
+        #[arg(long, default_value_t = 1.0, value_parser = equiarm_nodes::cli_values::rate)]
         rate: f64,
         /// Publish topic FROM on TO instead, given as FROM:TO (repeatable).
         #[arg(long = "remap", value_name = "FROM:TO")]
         remaps: Vec<String>,
         /// Milliseconds to wait after creating publishers before the first message, so subscribers
         /// can match.
-        #[arg(long, default_value_t = 1000)]
+        #[arg(long, default_value_t = 1000, value_parser = equiarm_nodes::cli_values::millis_or_zero)]
         wait_ms: u64,
         /// Lock-step: after each Observation wait for the GripperCommand naming its seq on the sibling
         /// gripper_cmd topic (re-publishing every this many ms), instead of the recorded pace.
-        #[arg(long, value_name = "MS")]
+        #[arg(long, value_name = "MS", value_parser = equiarm_nodes::cli_values::millis)]
         lockstep: Option<u64>,
     },
     /// Rewrites a bag whose recorder was killed as a complete, indexed bag.
@@ -373,7 +373,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Bag(BagCommand::Eval { bag, policy: Some(ckpt), net, config, json, .. }) => {
             // A checkpoint or run directory names its architecture in its manifest.
-            let (ckpt, net, cfg) = if ckpt.is_dir() {
+            let (ckpt, net, cfg) = if equiarm_sac::train::names_checkpoint(&ckpt) {
                 let dir = equiarm_sac::train::find_checkpoint(&ckpt)?;
                 let m = equiarm_sac::learner::read_manifest(&dir)?;
                 let a = &m.config.agent;

@@ -106,3 +106,40 @@ fn a_bad_ros_domain_id_is_an_error_naming_the_variable() {
     let err = String::from_utf8(out.stderr).unwrap();
     assert!(err.contains("ROS_DOMAIN_ID='999'"), "{err}");
 }
+
+/// Numbers that become durations, rates, step budgets or allocations are refused at the flag (exit
+/// 2, clap's usage error, or 1 for a config field) with the value and the accepted range, never a
+/// panic or a run that waits forever or runs out of memory.
+#[test]
+fn out_of_range_numbers_are_refused_at_the_flag_naming_the_range() {
+    let dir = support::scratch("cli_ranges");
+    let bag = dir.join("bag");
+    let bag = bag.to_str().unwrap();
+    let run = dir.join("run");
+    let run = run.to_str().unwrap();
+    let cases: [(&[&str], &str); 13] = [
+        (&["record", "-o", bag, "--all", "--duration-s", "inf"], "outside (0, 2592000]"),
+        (&["record", "-o", bag, "--all", "--duration-s", "NaN"], "outside (0, 2592000]"),
+        (&["record", "-o", bag, "--all", "--flush-ms", "18446744073709551615"], "outside 1..=3600000"),
+        (&["record", "-o", bag, "--all", "--polling-interval-ms", "0"], "outside 1..=3600000"),
+        (&["record", "-o", bag, "--all", "--split-size-mb", "0"], "split-size-mb"),
+        (&["bag", "play", bag, "--rate=-1"], "outside [0, 1000]"),
+        (&["bag", "play", bag, "--lockstep", "0"], "outside 1..=3600000"),
+        (&["sim", "--timeout-ms", "18446744073709551615"], "outside 1..=3600000"),
+        (&["policy", "--steps-per-update", "18446744073709551615"], "outside 1..=1000000"),
+        (&["train", "--idle-timeout-s", "inf"], "outside (0, 2592000]"),
+        (&["train", "--in-process", "--run-dir", run, "--num-envs", "1000000"], "num_envs"),
+        (&["train", "--in-process", "--run-dir", run, "--hidden", "100000000"], "agent.hidden"),
+        (&["train", "--in-process", "--run-dir", run, "--batch-size", "1000000000"], "batch_size"),
+    ];
+    for (args, expected) in cases {
+        let start = Instant::now();
+        let out = equiarm().args(args).env("ROS_DOMAIN_ID", "98").output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(matches!(out.status.code(), Some(1 | 2)), "{args:?}: {:?}\n{err}", out.status);
+        assert!(err.contains(expected), "{args:?}: no '{expected}' in:\n{err}");
+        assert!(!err.contains("panicked"), "{args:?} panicked:\n{err}");
+        assert!(start.elapsed() < Duration::from_secs(20), "{args:?} took {:?}", start.elapsed());
+    }
+    assert!(!dir.join("run").join("metrics.csv").exists(), "a refused config wrote a run");
+}

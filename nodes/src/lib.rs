@@ -6,6 +6,7 @@
 compile_error!("equiarm_nodes needs a ROS 2 distro feature: `jazzy` (the default) or `humble`");
 
 pub mod bag_tools;
+pub mod cli_values;
 pub mod echo;
 pub mod gate;
 pub mod ingest;

@@ -45,11 +45,11 @@ pub struct PolicyArgs {
     /// act at most this many policy steps ahead of its update count (from /trainer/status);
     /// 0 = no limit. With N envs and one update per N transitions, each env then makes about one
     /// step per update, as in the paper's synchronous loop.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, value_parser = crate::cli_values::steps)]
     pub max_lead: u64,
     /// With --max-lead: policy steps allowed per trainer update (1 for training envs; an eval env
     /// needs about eval_episodes × episode length / eval_every).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = crate::cli_values::positive_steps)]
     pub steps_per_update: u64,
     /// Lock-step with a trainer run with --deterministic: the k-th observation answered (from 0,
     /// expert steps included) waits for weights version k + 1. Needs mode sample or greedy; excludes --max-lead.
@@ -63,7 +63,7 @@ pub struct PolicyArgs {
 /// The actor's architecture and initial weights the options describe: (agent config, frame size,
 /// actor file). A directory's manifest wins over the flags.
 pub fn architecture(args: &PolicyArgs) -> anyhow::Result<(AgentConfig, usize, Option<PathBuf>)> {
-    if let Some(path) = args.checkpoint.as_ref().filter(|p| p.is_dir()) {
+    if let Some(path) = args.checkpoint.as_ref().filter(|p| equiarm_sac::train::names_checkpoint(p)) {
         let dir = equiarm_sac::train::find_checkpoint(path)?;
         let m = equiarm_sac::learner::read_manifest(&dir)?;
         return Ok((m.config.agent.clone(), m.config.image_size, Some(dir.join("actor.safetensors"))));

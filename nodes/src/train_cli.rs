@@ -93,13 +93,13 @@ pub struct TrainArgs {
     #[arg(long, short)]
     pub quiet: bool,
     /// Over DDS: publish the actor's weights on /policy/weights every N updates.
-    #[arg(long, default_value_t = 50)]
+    #[arg(long, default_value_t = 50, value_parser = crate::cli_values::positive_steps)]
     pub weights_every: u64,
     /// Over DDS: namespace of the evaluation sim+policy pair (its episodes carry eval = true).
     #[arg(long, default_value = "/eval")]
     pub eval_namespace: String,
     /// Over DDS: exit when no transition arrived for this many seconds after the first one.
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, default_value_t = 60.0, value_parser = crate::cli_values::seconds)]
     pub idle_timeout_s: f64,
     /// Over DDS: lock-step rounds (the policies need --deterministic too). Round r is every training
     /// env's r-th transition, processed in env-name order, then one update (once the replay is ready)

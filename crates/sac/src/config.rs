@@ -41,6 +41,19 @@ pub enum Augmentation {
     Center,
 }
 
+/// Largest frame side accepted (pixels): the replay's frame store refuses larger ones.
+pub const MAX_IMAGE_SIZE: usize = crate::frame::Frame::MAX_SIZE;
+/// Largest `agent.hidden` accepted (the paper: 64).
+pub const MAX_HIDDEN: usize = 512;
+/// Largest batch accepted (the paper: 128; 4,096 frames of 152 px are 1.9 GB of network input).
+pub const MAX_BATCH: usize = 4096;
+/// Largest number of envs accepted (the paper: 5).
+pub const MAX_ENVS: usize = 256;
+/// Largest episode step limit accepted (the paper: 50).
+pub const MAX_EPISODE_STEPS: usize = 10_000;
+/// Largest number of evaluation or demonstration episodes accepted (the paper: 100 at most).
+pub const MAX_EPISODES: usize = 100_000;
+
 /// Everything that defines a training run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -204,8 +217,25 @@ impl TrainConfig {
         if self.image_size < s {
             return err("image_size", format!("{} is smaller than the network input {s}", self.image_size));
         }
+        // Upper bounds: each of these numbers sizes an allocation or a set of simulators, so a typo
+        // (an extra zero or three) must fail here, naming the field, not run out of memory later.
+        if self.image_size > MAX_IMAGE_SIZE {
+            return err(
+                "image_size",
+                format!("{} is above {MAX_IMAGE_SIZE} (the paper's frames are 152 px)", self.image_size),
+            );
+        }
         if self.agent.hidden == 0 || !self.agent.hidden.is_multiple_of(8) {
             return err("agent.hidden", format!("{} must be a positive multiple of 8", self.agent.hidden));
+        }
+        if self.agent.hidden > MAX_HIDDEN {
+            return err(
+                "agent.hidden",
+                format!(
+                    "{} is above {MAX_HIDDEN} (the paper uses 64; the networks grow with its square)",
+                    self.agent.hidden
+                ),
+            );
         }
         if !(self.agent.lr > 0.0 && self.agent.lr.is_finite()) {
             return err("agent.lr", format!("{} must be positive", self.agent.lr));
@@ -221,6 +251,18 @@ impl TrainConfig {
         {
             return err("augmentation", "DrQ needs k ≥ 1 and m ≥ 1 (paper 2 and 2)".into());
         }
+        let bounded: [(&'static str, usize, usize, &str); 5] = [
+            ("batch_size", self.batch_size, MAX_BATCH, "the paper uses 128"),
+            ("num_envs", self.num_envs, MAX_ENVS, "each env is a simulator; the paper runs 5"),
+            ("max_episode_steps", self.max_episode_steps as usize, MAX_EPISODE_STEPS, "the paper's limit is 50"),
+            ("eval_episodes", self.eval_episodes, MAX_EPISODES, "the paper evaluates 100"),
+            ("demo_episodes", self.demo_episodes, MAX_EPISODES, "the paper uses 20–100"),
+        ];
+        for (field, value, max, why) in bounded {
+            if value > max {
+                return err(field, format!("{value} is above {max} ({why})"));
+            }
+        }
         if self.batch_size == 0 {
             return err("batch_size", "must be positive".into());
         }
@@ -234,6 +276,15 @@ impl TrainConfig {
             return err("eval_episodes", "must be positive when eval_every > 0".into());
         }
         self.replay.validate().map_err(|e| ConfigError { field: "replay", message: e.to_string() })?;
+        if self.training_starts > self.replay.capacity {
+            return err(
+                "training_starts",
+                format!(
+                    "{} is above the replay capacity {}: training would never start",
+                    self.training_starts, self.replay.capacity
+                ),
+            );
+        }
         Ok(())
     }
 
@@ -284,5 +335,32 @@ mod tests {
         assert_eq!(c.validate().unwrap_err().field, "agent.input_size");
         c = TrainConfig::reduced("block_pullin");
         assert_eq!(c.validate().unwrap_err().field, "task");
+    }
+
+    #[test]
+    fn sizes_above_their_bounds_are_refused_naming_the_field_and_the_bound() {
+        type Set = fn(&mut TrainConfig);
+        let base = TrainConfig::paper("block_pulling");
+        let cases: [(&str, Set); 8] = [
+            ("batch_size", |c| c.batch_size = MAX_BATCH + 1),
+            ("num_envs", |c| c.num_envs = 1_000_000),
+            ("agent.hidden", |c| c.agent.hidden = 100_000_000),
+            ("image_size", |c| c.image_size = MAX_IMAGE_SIZE + 1),
+            ("max_episode_steps", |c| c.max_episode_steps = u32::MAX),
+            ("eval_episodes", |c| c.eval_episodes = usize::MAX),
+            ("demo_episodes", |c| c.demo_episodes = MAX_EPISODES + 1),
+            ("training_starts", |c| c.training_starts = c.replay.capacity + 1),
+        ];
+        for (field, set) in cases {
+            let mut c = base.clone();
+            set(&mut c);
+            let e = c.validate().unwrap_err();
+            assert_eq!(e.field, field, "{e:?}");
+            assert!(e.message.contains("above"), "{field}: {}", e.message);
+        }
+        // The bounds themselves are accepted.
+        let mut c = base.clone();
+        (c.batch_size, c.num_envs, c.agent.hidden) = (MAX_BATCH, MAX_ENVS, MAX_HIDDEN);
+        c.validate().unwrap();
     }
 }

@@ -626,11 +626,33 @@ impl RunDirLock {
 /// What a run leaves in its directory that a new run there would overwrite or mix with its own.
 pub const RUN_FILES: [&str; 4] = ["metrics.csv", "metrics.jsonl", "evals.json", "checkpoints"];
 
-/// The newest checkpoint of a run directory (from `checkpoints/latest`), or `path` itself if it is
-/// a checkpoint directory.
+/// Whether `path` names a checkpoint as [`find_checkpoint`] reads it: a checkpoint or run
+/// directory, or a run's `checkpoints/latest` pointer file.
+pub fn names_checkpoint(path: &Path) -> bool {
+    path.is_dir() || is_latest_pointer(path)
+}
+
+fn is_latest_pointer(path: &Path) -> bool {
+    path.is_file() && path.file_name().is_some_and(|n| n == "latest")
+}
+
+/// The newest checkpoint of a run directory (from `checkpoints/latest`), the checkpoint a
+/// `checkpoints/latest` pointer file names, or `path` itself if it is a checkpoint directory.
 pub fn find_checkpoint(path: &Path) -> Result<PathBuf, TrainError> {
     if path.join("manifest.json").is_file() {
         return Ok(path.to_path_buf());
+    }
+    if is_latest_pointer(path) {
+        let name = std::fs::read_to_string(path)
+            .map_err(|e| TrainError::Io { path: path.to_path_buf(), message: e.to_string() })?;
+        let dir = path.parent().unwrap_or(Path::new(".")).join(name.trim());
+        if !dir.join("manifest.json").is_file() {
+            return Err(TrainError::Io {
+                path: dir,
+                message: format!("named by {} but not a checkpoint directory", path.display()),
+            });
+        }
+        return Ok(dir);
     }
     let latest = path.join("checkpoints").join("latest");
     let name = std::fs::read_to_string(&latest).map_err(|e| TrainError::Io {

@@ -52,6 +52,11 @@ fn k_updates_straight_equal_half_checkpoint_resume_half() {
     assert_eq!(half.updates, 6);
     let ck = find_checkpoint(&split_dir).unwrap();
     assert!(ck.ends_with("step_0000006"), "{}", ck.display());
+    // The run's `checkpoints/latest` pointer file names the same checkpoint (users pass it too).
+    let pointer = split_dir.join("checkpoints").join("latest");
+    assert!(equiarm_sac::train::names_checkpoint(&pointer) && equiarm_sac::train::names_checkpoint(&split_dir));
+    assert_eq!(find_checkpoint(&pointer).unwrap(), ck);
+    assert!(!equiarm_sac::train::names_checkpoint(&ck.join("actor.safetensors")));
     let resumed =
         run(tiny(), &RunOptions { run_dir: split_dir.clone(), resume: Some(ck), ..Default::default() }, &never)
             .unwrap();

@@ -1,0 +1,82 @@
+//! Parsers for the command-line numbers that become durations, rates or step budgets, with upper
+//! bounds: a typo (`--duration-s inf`, an extra zero or three) fails at the flag with a message that
+//! names the value and the accepted range, instead of panicking or waiting forever later. Use them as
+//! clap value parsers: `#[arg(long, value_parser = cli_values::seconds)]`.
+
+/// Longest duration accepted for a `*-s` flag: 30 days.
+pub const MAX_SECONDS: f64 = 30.0 * 24.0 * 3600.0;
+/// Longest interval accepted for a `*-ms` flag: one hour.
+pub const MAX_MILLIS: u64 = 3_600_000;
+/// Largest speed factor accepted by `bag play --rate`.
+pub const MAX_RATE: f64 = 1000.0;
+/// Largest step budget accepted by the policy's flow control (`--max-lead`, `--steps-per-update`).
+pub const MAX_STEPS: u64 = 1_000_000;
+
+/// A duration in seconds: finite, above 0, at most [`MAX_SECONDS`].
+pub fn seconds(s: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().parse().map_err(|_| format!("'{s}' is not a number of seconds"))?;
+    if v.is_finite() && v > 0.0 && v <= MAX_SECONDS {
+        Ok(v)
+    } else {
+        Err(format!("{s} s is outside (0, {MAX_SECONDS}] (30 days)"))
+    }
+}
+
+/// An interval in milliseconds: 1 ..= [`MAX_MILLIS`].
+pub fn millis(s: &str) -> Result<u64, String> {
+    bounded(s, "ms", 1, MAX_MILLIS)
+}
+
+/// An interval in milliseconds that may be 0 (no wait): 0 ..= [`MAX_MILLIS`].
+pub fn millis_or_zero(s: &str) -> Result<u64, String> {
+    bounded(s, "ms", 0, MAX_MILLIS)
+}
+
+/// A speed factor: finite, 0 (as fast as possible) ..= [`MAX_RATE`].
+pub fn rate(s: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if v.is_finite() && (0.0..=MAX_RATE).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("rate {s} is outside [0, {MAX_RATE}] (0: as fast as possible)"))
+    }
+}
+
+/// A step budget: 0 ..= [`MAX_STEPS`].
+pub fn steps(s: &str) -> Result<u64, String> {
+    bounded(s, "steps", 0, MAX_STEPS)
+}
+
+/// A step count that must be at least 1: 1 ..= [`MAX_STEPS`].
+pub fn positive_steps(s: &str) -> Result<u64, String> {
+    bounded(s, "steps", 1, MAX_STEPS)
+}
+
+/// A whole number in `min ..= max` (`unit` only words the error).
+pub fn bounded(s: &str, unit: &str, min: u64, max: u64) -> Result<u64, String> {
+    let v: u64 = s.trim().parse().map_err(|_| format!("'{s}' is not a whole number of {unit}"))?;
+    if (min..=max).contains(&v) { Ok(v) } else { Err(format!("{v} {unit} is outside {min}..={max}")) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn durations_and_rates_outside_their_ranges_are_refused_with_the_range() {
+        assert_eq!(seconds("2.5"), Ok(2.5));
+        for bad in ["inf", "NaN", "-1", "0", "1e12", "ten"] {
+            let e = seconds(bad).unwrap_err();
+            assert!(e.contains(bad) || e.contains("number"), "{bad}: {e}");
+        }
+        assert_eq!(millis("250"), Ok(250));
+        assert!(millis("0").unwrap_err().contains("1..=3600000"));
+        assert!(millis("18446744073709551615").unwrap_err().contains("outside"));
+        assert!(millis("-5").is_err());
+        assert_eq!(millis_or_zero("0"), Ok(0));
+        assert_eq!(rate("0"), Ok(0.0));
+        assert!(rate("-1").is_err() && rate("inf").is_err() && rate("1e6").is_err());
+        assert_eq!(steps("0"), Ok(0));
+        assert!(positive_steps("0").is_err() && steps("1000001").is_err());
+    }
+}
