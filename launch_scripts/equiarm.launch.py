@@ -11,7 +11,8 @@ same as `train.sh` starts:
 - the trainer: `equiarm train --preset P --task T --num-envs N --seed S --run-dir <run_dir>
   --eval-namespace /eval [--total-updates U] [--model M] [--deterministic]` (over DDS); when it exits
   the whole launch shuts down (the recorder gets SIGINT and closes its bag);
-- N training pairs: `equiarm sim --namespace /envK --task T --seed 1000·S+K --resolution FRAME` and
+- N training pairs: `equiarm sim --namespace /envK --task T --seed 1000·S+K --resolution FRAME`
+  (`--clock` for /env0) and
   `equiarm policy --namespace /envK --mode sample --model M --hidden H --image FRAME:INPUT
   --seed 1000·S+K --expert-episodes D --max-lead 10` (D: the config's demo episodes spread over the
   envs; `--deterministic` instead of `--max-lead` with deterministic:=true);
@@ -97,6 +98,8 @@ def commands(args):
         sim = [exe, "sim", "--namespace", ns, "--task", task, "--seed", str(env_seed), "--resolution", str(frame)]
         if ns == EVAL_NAMESPACE:
             sim.append("--eval")  # its EpisodeResults are marked as evaluation episodes
+        if ns == "/env0":
+            sim.append("--clock")  # its simulated time on /clock, as train.sh does
         policy = [exe, "policy", "--namespace", ns, "--mode", mode, "--model", model, "--hidden", str(hidden),
                   "--image", image, "--seed", str(env_seed)] + extra
         return [(f"sim_{name}", sim), (f"policy_{name}", policy)]

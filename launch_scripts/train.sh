@@ -120,8 +120,10 @@ done
 # the eval pair may run about eval_episodes × 50 steps per eval_every updates
 eval_rate=$(( ($(cfg_get eval_episodes) * 50 + $(cfg_get eval_every) - 1) / ($(cfg_get eval_every) + 1) + 1 ))
 start policy_eval "$bin" policy --namespace /eval --mode greedy "${arch[@]}" --seed $((seed * 1000 + 999)) --max-lead 50 --steps-per-update "$eval_rate"
+# /env0's sim also publishes its simulated time on /clock (for tools with use_sim_time)
 for i in $(seq 0 $((num_envs - 1))); do
-  start "sim$i" "$bin" sim --namespace "/env$i" --task "$task" --seed $((seed * 1000 + i)) --resolution "$image"
+  clock=(); [ "$i" -eq 0 ] && clock=(--clock)
+  start "sim$i" "$bin" sim --namespace "/env$i" --task "$task" --seed $((seed * 1000 + i)) --resolution "$image" "${clock[@]}"
 done
 start sim_eval "$bin" sim --namespace /eval --eval --task "$task" --seed $((seed * 1000 + 999)) --resolution "$image"
 

@@ -13,6 +13,7 @@ use support::golden_values::*;
 
 use equiarm_msgs::builtin_interfaces::Time;
 use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, PolicyWeights, TrainerStatus, Transition};
+use equiarm_msgs::rosgraph_msgs::Clock;
 use equiarm_msgs::sensor_msgs::{CameraInfo, Image, RegionOfInterest};
 use equiarm_msgs::std_msgs::Header;
 use equiarm_msgs::{RosMessage, cdr};
@@ -51,7 +52,9 @@ fn cases() -> BTreeMap<String, Case> {
     add("EpisodeResult.default", case(EpisodeResult::default()));
     add("PolicyWeights.default", case(PolicyWeights::default()));
     add("TrainerStatus.default", case(TrainerStatus::default()));
+    add("Clock.default", case(Clock::default()));
     add("Time.special", case(Time { sec: i32::MIN, nanosec: 999_999_999 }));
+    add("Clock.special", case(Clock { clock: Time { sec: i32::MAX, nanosec: 166_666_667 } }));
     add("Header.special", case(header(1_700_000_000, 123_456_789, TEXT)));
     add("Image.rgb8", case(rgb8(152, 152, "camera_color_optical_frame")));
     add("Image.depth", case(depth(152, 152, TEXT, 1)));

@@ -179,3 +179,41 @@ async fn cyclonedds_ls_lists_our_topics_under_ros2_names() {
         assert!(out.contains(needle), "`cyclonedds ls` does not show {needle}:\n{out}");
     }
 }
+
+/// `equiarm sim --clock`, driven by the Cyclone DDS peer as an expert policy: the peer receives
+/// `/clock` (rosgraph_msgs/msg/Clock) never decreasing (a re-published Observation repeats its time),
+/// each value the stamp of an Observation (or of the episode's terminal observation), and every
+/// Observation's stamp on it.
+#[test]
+fn sim_clock_reaches_cyclonedds_monotonic_and_equal_to_the_observation_stamps() {
+    const DOMAIN: u16 = 76;
+    let mut sim = std::process::Command::new(env!("CARGO_BIN_EXE_equiarm"))
+        .args(["sim", "--clock", "--task", "block_pulling", "--namespace", "/clk", "--seed", "3"])
+        .args(["--resolution", "38", "--episodes", "1"])
+        .env("ROS_DOMAIN_ID", DOMAIN.to_string())
+        .env("RUST_LOG", "warn,rustdds=off,ros2_client=off")
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("spawning equiarm sim");
+    let lines = json_lines(peer("clock", DOMAIN, 60));
+    let status = sim.wait().unwrap();
+    assert!(status.success(), "equiarm sim failed: {status}");
+    let nanos = |l: &serde_json::Value| l["sec"].as_i64().unwrap() * 1_000_000_000 + l["nanosec"].as_i64().unwrap();
+    let of = |event: &str| lines.iter().filter(|l| l["event"] == event).map(nanos).collect::<Vec<i64>>();
+    let (clock, obs, episode) = (of("clock"), of("obs"), of("episode"));
+    assert_eq!(episode.len(), 1, "the peer saw no EpisodeResult: {lines:?}");
+    assert!(obs.len() >= 2, "too few observations: {obs:?}");
+    assert!(clock.windows(2).all(|w| w[0] <= w[1]), "/clock decreases: {clock:?}");
+    for t in &obs {
+        assert!(clock.contains(t), "observation stamp {t} ns never on /clock: {clock:?}");
+    }
+    // Every /clock value is an observation's stamp: the answered ones and the terminal one, which is
+    // the EpisodeResult's stamp.
+    for t in &clock {
+        assert!(obs.contains(t) || *t == episode[0], "/clock {t} ns is no observation's stamp");
+    }
+    assert_eq!(clock.last(), Some(&episode[0]), "/clock ends at the terminal observation");
+    let mut distinct = clock.clone();
+    distinct.dedup();
+    assert_eq!(distinct.len(), obs.len() + 1, "one /clock time per observation and the terminal one");
+}

@@ -105,6 +105,11 @@ fn train_sh_runs_the_suite_to_the_end() {
     assert!(run_dir.join("checkpoints/latest").is_file());
     assert!(run_dir.join("learning_curve.png").is_file());
     bag_opens(&run_dir.join("bag"));
+    // /env0's sim publishes its simulated time on /clock, and `record --all` records it as ROS 2's type.
+    let info = Command::new(bin()).args(["bag", "info"]).arg(run_dir.join("bag")).output().unwrap();
+    let info = String::from_utf8_lossy(&info.stdout);
+    let clock = info.lines().find(|l| l.trim_start().starts_with("/clock ")).unwrap_or_else(|| panic!("{info}"));
+    assert!(clock.contains("rosgraph_msgs/msg/Clock") && !clock.contains(" 0 msgs"), "{clock}");
     // The trained actor over the recorded transitions, its architecture from the run's manifest.
     let ev = Command::new(bin())
         .args(["bag", "eval", "--json", "--policy"])

@@ -95,6 +95,10 @@ macro_rules! with_message_type {
                 type $M = equiarm_msgs::builtin_interfaces::Time;
                 Ok($body)
             }
+            Some(equiarm_msgs::rosgraph_msgs::Clock::TYPE_NAME) => {
+                type $M = equiarm_msgs::rosgraph_msgs::Clock;
+                Ok($body)
+            }
             Some(equiarm_msgs::std_msgs::Header::TYPE_NAME) => {
                 type $M = equiarm_msgs::std_msgs::Header;
                 Ok($body)

@@ -106,12 +106,20 @@ fn subscribe(
 }
 
 /// ROS name and type of a discovered DDS topic, if it is a ROS topic of a known type.
+///
+/// `/clock` counts only as `rosgraph_msgs/msg/Clock`, what ROS 2 and `equiarm sim --clock` publish:
+/// ros2-client (our ROS 2 library) announces a `/clock` topic of type `builtin_interfaces/msg/Time`
+/// in every node, on which nothing is ever published, and recording that one first would leave the
+/// real clock unrecorded.
 fn ros_topic(dds_name: &str, dds_type: &str) -> Option<(String, &'static str)> {
     let name = dds_name
         .strip_prefix("rt/")
         .map(|n| format!("/{n}"))
         .or_else(|| dds_name.starts_with('/').then(|| dds_name.to_string()))?;
     let t = equiarm_msgs::ALL_TYPES.iter().find(|t| t.dds_type_name == dds_type)?;
+    if name == "/clock" && t.type_name != equiarm_msgs::rosgraph_msgs::Clock::TYPE_NAME {
+        return None;
+    }
     Some((name, t.type_name))
 }
 
@@ -211,6 +219,12 @@ mod tests {
             Some(("/env0/observation".into(), "equiarm_msgs/msg/Observation"))
         );
         assert_eq!(ros_topic("rt/x", "std_msgs::msg::dds_::String_"), None);
+        // ros2-client's placeholder /clock is not recorded; the real one is.
+        assert_eq!(ros_topic("rt/clock", "builtin_interfaces::msg::dds_::Time_"), None);
+        assert_eq!(
+            ros_topic("rt/clock", "rosgraph_msgs::msg::dds_::Clock_"),
+            Some(("/clock".to_string(), "rosgraph_msgs/msg/Clock"))
+        );
         assert_eq!(ros_topic("rq/x/srvRequest", "equiarm_msgs::msg::dds_::Observation_"), None);
     }
 }

@@ -16,7 +16,12 @@
 //! `observation` topic skips that one seq at each episode boundary.
 //!
 //! Stamps come from a simulated clock: one tick of [`SimClock::step_ns`] (the physics time of one env
-//! step, `dt * substeps`) per observation made, from 0; wall time is never read.
+//! step, `dt * substeps`) per observation made, from 0; wall time is never read. With `--clock` the
+//! node also publishes that time on `/clock` (`rosgraph_msgs/msg/Clock`, reliable keep-last 10, which
+//! matches rclpy's and rclcpp's best-effort clock subscriptions too) just before each publication of
+//! an observation (again with a re-publication, so the clock never decreases) and at the terminal
+//! one, so ROS tools with `use_sim_time` line up with the stamps. One sim per graph should do it:
+//! each env has its own simulated time.
 //!
 //! ## Limitations
 //! One env per process (run N processes in `/env0 … /envN-1` for N envs). Episodes are `eval` only
@@ -27,6 +32,7 @@ use std::time::Duration;
 use anyhow::{Context as _, bail};
 use equiarm_msgs::builtin_interfaces::Time;
 use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, Transition};
+use equiarm_msgs::rosgraph_msgs::Clock;
 use equiarm_msgs::sensor_msgs::{CameraInfo, Image};
 use equiarm_msgs::std_msgs::Header;
 use equiarm_sim::{Action, Env, EnvConfig, SimError, TaskKind, ViewPreset, rng::Rng};
@@ -77,12 +83,16 @@ pub struct SimArgs {
     #[arg(long)]
     pub episodes: Option<u32>,
     /// Re-publish the current Observation when no command for it came within this time.
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, default_value_t = 1000, value_parser = crate::cli_values::millis)]
     pub timeout_ms: u64,
     /// An evaluation env: its EpisodeResults have `eval` set (the trainer and `bag eval` count them
     /// as evaluation episodes, never as training data).
     #[arg(long)]
     pub eval: bool,
+    /// Publish this env's simulated time on /clock (rosgraph_msgs/msg/Clock), equal to the stamp of
+    /// each Observation, for nodes with use_sim_time. Give it to one sim per graph (train.sh: /env0).
+    #[arg(long)]
+    pub clock: bool,
 }
 
 /// The EnvConfig the arguments describe: the config file (or defaults), then the flags.
@@ -129,11 +139,14 @@ pub fn parse_view(name: &str) -> anyhow::Result<ViewPreset> {
 /// Simulated time: `ticks * step_ns` nanoseconds.
 #[derive(Clone, Copy, Debug)]
 pub struct SimClock {
+    /// Simulated time of one env step, ns: `dt * substeps` of the physics settings, rounded.
     pub step_ns: i64,
+    /// Ticks taken so far (one per observation made); the next stamp is `ticks * step_ns`.
     pub ticks: i64,
 }
 
 impl SimClock {
+    /// A clock at time 0 whose tick is one env step of `cfg`'s physics (`dt * substeps` seconds).
     pub fn new(cfg: &EnvConfig) -> Self {
         let step_s = cfg.params.dt as f64 * cfg.params.substeps as f64;
         Self { step_ns: (step_s * 1e9).round() as i64, ticks: 0 }
@@ -150,10 +163,15 @@ impl SimClock {
 /// What a run did (also logged at shutdown).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct SimStats {
+    /// Env steps taken (commands applied).
     pub steps: u64,
+    /// Episodes that ended (and had their `EpisodeResult` published).
     pub episodes: u64,
+    /// Times an Observation was published again because no command for it came within the timeout.
     pub republished: u64,
+    /// Commands ignored because their `obs_seq` was not that of the Observation waited on.
     pub wrong_seq: u64,
+    /// Commands for the awaited Observation rejected because a field was NaN or infinite.
     pub rejected: u64,
 }
 
@@ -177,6 +195,13 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
     let transition_pub = node.publisher::<Transition>("/transitions", qos::stream(100))?;
     let episode_pub = node.publisher::<EpisodeResult>("/episodes", qos::stream(100))?;
     let cmd_sub = node.subscription::<GripperCommand>("gripper_cmd", qos::command())?;
+    let clock_pub = if args.clock { Some(node.publisher::<Clock>("/clock", qos::command())?) } else { None };
+    let publish_clock = async |stamp: &Time| -> anyhow::Result<()> {
+        if let Some(p) = &clock_pub {
+            p.publish(Clock { clock: stamp.clone() }).await?;
+        }
+        Ok(())
+    };
     let camera = CameraPublishers::new(&mut node, &env)?;
     let timeout = Duration::from_millis(args.timeout_ms.max(1));
     let task = cfg.task.name();
@@ -197,6 +222,7 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
             camera.publish(&node, &obs).await?;
             // Wait for the command naming this observation; re-publish on timeout.
             let cmd = loop {
+                publish_clock(&obs.header.stamp).await?;
                 obs_pub.publish(obs.clone()).await?;
                 let deadline = tokio::time::Instant::now() + timeout;
                 let got = loop {
@@ -263,6 +289,7 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
             transition_pub.publish(transition).await?;
             obs = next;
             if r.done {
+                publish_clock(&obs.header.stamp).await?;
                 camera.publish(&node, &obs).await?;
                 let result = EpisodeResult {
                     header: obs.header.clone(),

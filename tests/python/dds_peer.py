@@ -8,6 +8,9 @@ the wire. Every loop is bounded in count and time.
     dds_peer.py send DOMAIN SECONDS      publish the golden GripperCommands alternately, 20 Hz
     dds_peer.py send-bad DOMAIN SECONDS  publish payloads that do not decode as GripperCommand under
                                          its type name, 20 Hz, then good ones
+    dds_peer.py clock DOMAIN SECONDS     act as an expert policy for the sim in /clk (answer each
+                                         Observation with its expert action) and print every /clock
+                                         sample and every Observation stamp, until an EpisodeResult
 """
 
 import json
@@ -123,6 +126,50 @@ def send_bad(domain: int, seconds: float):
     emit(event="sent", bad=n_bad, good=n_good)
 
 
+def clock(domain: int, seconds: float):
+    """/clock as an rclpy node sees it, while this peer drives the sim in /clk with expert actions."""
+    dp = DomainParticipant(domain)
+    clock_reader = DataReader(dp, Topic(dp, "rt/clock", idl.Clock), qos=Qos(
+        Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.Volatile, Policy.History.KeepLast(100),
+        Policy.DataRepresentation(use_cdrv0_representation=True)))
+    obs_reader = DataReader(dp, Topic(dp, "rt/clk/observation", idl.Observation), qos=RCLPY_DEFAULT)
+    episodes = DataReader(dp, Topic(dp, "rt/episodes", idl.EpisodeResult), qos=RCLPY_DEFAULT)
+    cmd_writer = DataWriter(dp, Topic(dp, "rt/clk/gripper_cmd", idl.GripperCommand), qos=RCLPY_DEFAULT)
+    deadline = time.monotonic() + seconds
+    answered, ended = set(), False
+    emit(event="ready")
+    # Answer nothing before both readers have matched the sim's writers: the sim re-publishes an
+    # unanswered Observation (and /clock with it) every second, so no stamp is missed on either.
+    while time.monotonic() < deadline and not (clock_reader.get_matched_publications()
+                                                 and obs_reader.get_matched_publications()):
+        time.sleep(0.02)
+    while time.monotonic() < deadline and not ended:
+        idle = True
+        for s in clock_reader.take(N=100):
+            if isinstance(s, idl.Clock):
+                idle = False
+                emit(event="clock", sec=s.clock.sec, nanosec=s.clock.nanosec)
+        for s in obs_reader.take(N=10):
+            if isinstance(s, idl.Observation) and s.seq not in answered:
+                idle = False
+                answered.add(s.seq)
+                emit(event="obs", seq=s.seq, sec=s.header.stamp.sec, nanosec=s.header.stamp.nanosec)
+                cmd = s.expert_action
+                cmd.obs_seq = s.seq
+                cmd_writer.write(cmd)
+        for s in episodes.take(N=10):
+            if isinstance(s, idl.EpisodeResult) and s.env == "clk":
+                ended = True
+                emit(event="episode", steps=s.steps, sec=s.header.stamp.sec, nanosec=s.header.stamp.nanosec)
+        if idle:
+            time.sleep(0.005)
+    time.sleep(0.3)  # the last /clock samples
+    for s in clock_reader.take(N=100):
+        if isinstance(s, idl.Clock):
+            emit(event="clock", sec=s.clock.sec, nanosec=s.clock.nanosec)
+    emit(event="done", ended=ended)
+
+
 if __name__ == "__main__":
     mode, domain, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
-    {"receive": receive, "send": send, "send-bad": send_bad}[mode](domain, seconds)
+    {"receive": receive, "send": send, "send-bad": send_bad, "clock": clock}[mode](domain, seconds)

@@ -23,6 +23,11 @@ class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
 
 
 @dataclass
+class Clock(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
+    clock: Time = field(default_factory=Time)
+
+
+@dataclass
 class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
     stamp: Time = field(default_factory=Time)
     frame_id: str = ""
@@ -145,7 +150,7 @@ class TrainerStatus(IdlStruct, typename="equiarm_msgs::msg::dds_::TrainerStatus_
     last_eval_episodes: uint32 = 0
 
 
-ALL = [Time, Header, Image, RegionOfInterest, CameraInfo, GripperCommand, Observation, Transition,
+ALL = [Time, Clock, Header, Image, RegionOfInterest, CameraInfo, GripperCommand, Observation, Transition,
        EpisodeResult, PolicyWeights, TrainerStatus]
 
 for _cls, _member in ((Image, "data"), (PolicyWeights, "data")):

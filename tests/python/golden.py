@@ -108,6 +108,7 @@ def cases():
     for cls in idl.ALL:
         c[f"{cls.__name__}.default"] = cls()
     c["Time.special"] = idl.Time(sec=-(2**31), nanosec=999_999_999)
+    c["Clock.special"] = idl.Clock(clock=idl.Time(sec=2**31 - 1, nanosec=166_666_667))
     c["Header.special"] = header(1_700_000_000, 123_456_789, TEXT)
     c["Image.rgb8"] = rgb8(152, 152, "camera_color_optical_frame")
     c["Image.depth"] = depth(152, 152, TEXT, 1)
@@ -164,7 +165,7 @@ def check_std_msgs_match_upstream(ts):
         ours = get_types_from_msg(p.read_text(), name)[name]
         assert ours == ts.fielddefs[name], f"{p}: fields differ from upstream {name}"
         n += 1
-    assert n == 5, n
+    assert n == 6, n
 
 
 def to_rosbags(ts, value):

@@ -234,6 +234,7 @@ def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
         assert sim[1] == "sim" and _flag(sim, "--namespace") == ns and _flag(sim, "--task") == "block_picking"
         assert _flag(sim, "--seed") == str(seed) and _flag(sim, "--resolution") == str(frame)
         assert ("--eval" in sim) == (ns == "/eval")
+        assert ("--clock" in sim) == (ns == "/env0"), "exactly one sim publishes /clock"
         assert pol[1] == "policy" and _flag(pol, "--namespace") == ns
         assert _flag(pol, "--mode") == ("greedy" if ns == "/eval" else "sample")
         assert _flag(pol, "--image") == image and _flag(pol, "--hidden") == str(cfg["agent"]["hidden"])
