@@ -18,37 +18,17 @@ struct Args {
     n: u64,
     /// Only this task (block_pulling, block_pushing, block_picking, drawer_opening, block_in_bowl;
     /// `all`: every task, the default).
-    #[arg(value_parser = parse_task)]
-    task: Option<Task>,
+    #[arg(default_value = "all")]
+    task: String,
 }
 
-/// One task, or every task.
-#[derive(Clone, Copy, Debug)]
-enum Task {
-    One(TaskKind),
-    All,
-}
-
-fn parse_task(s: &str) -> Result<Task, String> {
-    if s == "all" {
-        return Ok(Task::All);
-    }
-    TaskKind::from_name(s).map(Task::One).ok_or_else(|| format!("unknown task `{s}`"))
-}
-
-fn main() -> Result<(), equiarm_sim::SimError> {
+fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args = Args::parse();
     let n = args.n;
-    let only = match args.task {
-        Some(Task::One(t)) => Some(t),
-        Some(Task::All) | None => None,
-    };
+    let tasks = TaskKind::select(&args.task)?;
     let verbose = std::env::var_os("VERBOSE").is_some();
     println!("task             successes / episodes   mean steps (successes)");
-    for task in TaskKind::ALL {
-        if only.is_some_and(|t| t != task) {
-            continue;
-        }
+    for task in tasks {
         let mut cfg = EnvConfig::new(task);
         cfg.render = false;
         if let Some(v) = std::env::var("SUBSTEPS").ok().and_then(|v| v.parse().ok()) {

@@ -19,8 +19,8 @@ struct Args {
     #[arg(default_value = "snapshots")]
     out_dir: PathBuf,
     /// Only this task (`all`: every task, the default).
-    #[arg(value_parser = parse_task)]
-    task: Option<Task>,
+    #[arg(default_value = "all")]
+    task: String,
     /// Episode seed of the reset.
     #[arg(default_value_t = 0)]
     seed: u64,
@@ -32,35 +32,15 @@ struct Args {
     preset: ViewPreset,
 }
 
-/// One task, or every task.
-#[derive(Clone, Copy, Debug)]
-enum Task {
-    One(TaskKind),
-    All,
-}
-
-fn parse_task(s: &str) -> Result<Task, String> {
-    if s == "all" {
-        return Ok(Task::All);
-    }
-    TaskKind::from_name(s).map(Task::One).ok_or_else(|| format!("unknown task `{s}`"))
-}
-
 fn parse_preset(s: &str) -> Result<ViewPreset, String> {
     ViewPreset::from_name(s).ok_or_else(|| format!("unknown camera preset `{s}`"))
 }
 
-fn main() -> Result<(), equiarm_sim::SimError> {
+fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args = Args::parse();
     let (out, seed, steps, preset) = (args.out_dir, args.seed, args.steps, args.preset);
-    let only = match args.task {
-        Some(Task::One(t)) => Some(t),
-        Some(Task::All) | None => None,
-    };
-    for task in TaskKind::ALL {
-        if only.is_some_and(|t| t != task) {
-            continue;
-        }
+    let tasks = TaskKind::select(&args.task)?;
+    for task in tasks {
         let mut cfg = EnvConfig::new(task);
         cfg.camera = preset.config();
         let files = snapshot_task(cfg, seed, steps, &out)?;

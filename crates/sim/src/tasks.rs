@@ -66,6 +66,18 @@ impl TaskKind {
         let n = name.strip_prefix("close_loop_").unwrap_or(name);
         Self::ALL.into_iter().find(|t| t.name() == n)
     }
+
+    /// The tasks a command-line word names: `all` is every task, any other word the one task
+    /// [`TaskKind::from_name`] finds; an unknown word is an error that lists the names.
+    pub fn select(word: &str) -> Result<Vec<Self>, String> {
+        if word == "all" {
+            return Ok(Self::ALL.to_vec());
+        }
+        Self::from_name(word).map(|t| vec![t]).ok_or_else(|| {
+            let names: Vec<_> = Self::ALL.iter().map(|t| t.name()).collect();
+            format!("unknown task `{word}`: use {} or all", names.join(", "))
+        })
+    }
 }
 
 /// Gripper reset pose (docs/paper.md §3.1): TCP (0.45, 0, 0.20), yaw 0, fully open.
@@ -388,4 +400,21 @@ fn toward(gripper: &Gripper, goal: Vector, goal_yaw: f32) -> (Action, bool) {
 /// The angle congruent to `angle` modulo `period` that is nearest to `reference`.
 pub fn nearest_equivalent(angle: f32, reference: f32, period: f32) -> f32 {
     angle + ((reference - angle) / period).round() * period
+}
+
+#[cfg(test)]
+mod name_tests {
+    use super::TaskKind;
+
+    #[test]
+    fn names_round_trip_and_all_selects_every_task() {
+        for t in TaskKind::ALL {
+            assert_eq!(TaskKind::from_name(t.name()), Some(t));
+            assert_eq!(TaskKind::select(t.name()), Ok(vec![t]));
+        }
+        assert_eq!(TaskKind::from_name("close_loop_block_pulling"), Some(TaskKind::BlockPulling));
+        assert_eq!(TaskKind::select("all").unwrap(), TaskKind::ALL.to_vec());
+        let e = TaskKind::select("block_pullin").unwrap_err();
+        assert!(e.contains("block_pullin") && e.contains("drawer_opening") && e.contains("all"), "{e}");
+    }
 }
