@@ -216,6 +216,9 @@ impl Env {
             return Err(SimError::Action(format!("non-finite component in {action:?}")));
         }
         let ep = self.episode.as_mut().ok_or(SimError::NotReset)?;
+        if ep.done {
+            return Err(SimError::EpisodeOver { steps: ep.steps });
+        }
         ep.gripper.apply(&mut ep.scene, *action);
         ep.steps += 1;
         let held = ep.gripper.held_bodies(&ep.scene);

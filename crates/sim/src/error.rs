@@ -49,6 +49,12 @@ pub enum SimError {
     /// `step` was called before `reset`.
     #[error("the environment must be reset before it is stepped")]
     NotReset,
+    /// `step` was called after the episode ended (success, an invalid state or the step limit).
+    #[error("the episode ended after {steps} steps: reset the environment before stepping it again")]
+    EpisodeOver {
+        /// Steps the ended episode took.
+        steps: u32,
+    },
     /// Writing an image failed.
     #[error("writing image {file}: {message}")]
     Image {

@@ -77,6 +77,21 @@ fn bad_actions_and_unreset_env_are_errors() {
 }
 
 #[test]
+fn an_ended_episode_refuses_more_steps_until_reset() {
+    let mut cfg = EnvConfig::new(TaskKind::BlockPulling);
+    cfg.max_steps = 2;
+    let mut env = Env::new(cfg).unwrap();
+    env.reset(0).unwrap();
+    assert!(!env.step(&Action::default()).unwrap().done);
+    let last = env.step(&Action::default()).unwrap();
+    assert!(last.done && last.info.timeout);
+    // No reward, step count or state change after the end: the caller must reset.
+    assert!(matches!(env.step(&Action::default()), Err(SimError::EpisodeOver { steps: 2 })));
+    env.reset(1).unwrap();
+    assert!(env.step(&Action::default()).is_ok());
+}
+
+#[test]
 fn random_reflection_mirrors_the_clean_image() {
     let clean = run(&EnvConfig::new(TaskKind::BlockPushing), 2, 5);
     let mut cfg = EnvConfig::new(TaskKind::BlockPushing);
