@@ -186,11 +186,24 @@ fn holding_flag_follows_the_grasp() {
             break;
         }
     }
-    assert!(held_at.is_some());
-    // Opening the jaw drops the cube: no longer held.
-    let o = env.step(&Action { open_ratio: 1.0, ..Action::default() }).unwrap().observation;
-    let o = env.step(&Action { open_ratio: 1.0, ..Action::default() }).map(|r| r.observation).unwrap_or(o);
-    assert!(!o.holding);
+    assert!(held_at.is_some(), "the expert grasped the cube");
+    // The same episode again, up to the step before it succeeded (the cube lifted and held; an ended
+    // episode refuses more steps): opening the jaw there drops the cube.
+    let last = obs.step;
+    let mut obs = env.reset(8).unwrap();
+    while obs.step + 1 < last {
+        let r = env.step(&obs.expert_action).unwrap();
+        assert!(!r.done, "the replayed episode ended early");
+        obs = r.observation;
+    }
+    assert!(obs.holding, "the cube is held the step before success");
+    let r = env.step(&Action { open_ratio: 1.0, ..Action::default() }).unwrap();
+    let o = if r.done {
+        r.observation
+    } else {
+        env.step(&Action { open_ratio: 1.0, ..Action::default() }).map(|r| r.observation).unwrap_or(r.observation)
+    };
+    assert!(!o.holding, "still holding after the jaw opened");
 }
 
 /// BulletArm's floor (pybullet's `plane.urdf`) has 1 m tiles: in the default oblique view of the
