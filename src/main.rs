@@ -90,7 +90,7 @@ struct RecordArgs {
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
     split_size_mb: Option<u64>,
     /// Start a new file after this many seconds.
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=2_592_000))]
+    #[arg(long, value_parser = equiarm_nodes::cli_values::whole_seconds)]
     split_duration_s: Option<u64>,
     /// Flush interval in ms: a killed recorder loses at most about this much.
     #[arg(long, default_value_t = 250, value_parser = equiarm_nodes::cli_values::millis)]

@@ -14,12 +14,13 @@ pub const MAX_STEPS: u64 = 1_000_000;
 
 /// A duration in seconds: finite, above 0, at most [`MAX_SECONDS`].
 pub fn seconds(s: &str) -> Result<f64, String> {
-    let v: f64 = s.trim().parse().map_err(|_| format!("'{s}' is not a number of seconds"))?;
-    if v.is_finite() && v > 0.0 && v <= MAX_SECONDS {
-        Ok(v)
-    } else {
-        Err(format!("{s} s is outside (0, {MAX_SECONDS}] (30 days)"))
-    }
+    let v = number(s, "number of seconds")?;
+    if v > 0.0 && v <= MAX_SECONDS { Ok(v) } else { Err(format!("{s} s is outside (0, {MAX_SECONDS}] (30 days)")) }
+}
+
+/// A whole number of seconds: 1 ..= [`MAX_SECONDS`].
+pub fn whole_seconds(s: &str) -> Result<u64, String> {
+    bounded(s, "s", 1, MAX_SECONDS as u64)
 }
 
 /// An interval in milliseconds: 1 ..= [`MAX_MILLIS`].
@@ -34,12 +35,18 @@ pub fn millis_or_zero(s: &str) -> Result<u64, String> {
 
 /// A speed factor: finite, 0 (as fast as possible) ..= [`MAX_RATE`].
 pub fn rate(s: &str) -> Result<f64, String> {
-    let v: f64 = s.trim().parse().map_err(|_| format!("'{s}' is not a number"))?;
-    if v.is_finite() && (0.0..=MAX_RATE).contains(&v) {
+    let v = number(s, "number")?;
+    if (0.0..=MAX_RATE).contains(&v) {
         Ok(v)
     } else {
         Err(format!("rate {s} is outside [0, {MAX_RATE}] (0: as fast as possible)"))
     }
+}
+
+/// A number that parses; NaN and the infinities come back as `NaN`, which no range contains.
+fn number(s: &str, what: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().parse().map_err(|_| format!("'{s}' is not a {what}"))?;
+    Ok(if v.is_finite() { v } else { f64::NAN })
 }
 
 /// A step budget: 0 ..= [`MAX_STEPS`].
@@ -73,6 +80,8 @@ mod tests {
         assert!(millis("0").unwrap_err().contains("1..=3600000"));
         assert!(millis("18446744073709551615").unwrap_err().contains("outside"));
         assert!(millis("-5").is_err());
+        assert_eq!(whole_seconds("60"), Ok(60));
+        assert!(whole_seconds("0").is_err() && whole_seconds("2592001").is_err());
         assert_eq!(millis_or_zero("0"), Ok(0));
         assert_eq!(rate("0"), Ok(0.0));
         assert!(rate("-1").is_err() && rate("inf").is_err() && rate("1e6").is_err());
