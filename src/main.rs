@@ -110,6 +110,27 @@ enum CompressionArg {
     Zstd,
 }
 
+/// A network file's architecture when nothing records it (`nn check-equivariance`, `bag eval
+/// --policy` on a bare actor file).
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum NetPreset {
+    /// The paper's networks: hidden 64, 128 px input (the rotation experiment's for rot-equi).
+    Paper,
+    /// The networks crate's reduced size: hidden 16, 64 px input.
+    Reduced,
+}
+
+impl NetPreset {
+    fn config(self, kind: Option<equiarm_nn::diagnostics::NetKind>) -> equiarm_nn::nets::NetConfig {
+        use equiarm_nn::nets::NetConfig;
+        match (self, kind) {
+            (NetPreset::Paper, Some(equiarm_nn::diagnostics::NetKind::RotEqui)) => NetConfig::paper_rotation(),
+            (NetPreset::Paper, _) => NetConfig::paper(),
+            (NetPreset::Reduced, _) => NetConfig::reduced_cpu(),
+        }
+    }
+}
+
 #[derive(Subcommand)]
 enum NnCommand {
     /// Measures a network's equivariance error ||f(g.x) - g.f(x)|| / ||f(x)|| per group element on
@@ -124,8 +145,8 @@ enum NnCommand {
         #[arg(long, default_value = "equi-actor")]
         net: String,
         /// Architecture: `paper` (hidden 64, 128 px) or `reduced` (hidden 16, 64 px); the flags below override it.
-        #[arg(long, default_value = "paper")]
-        config: String,
+        #[arg(long, value_enum, default_value_t = NetPreset::Paper)]
+        config: NetPreset,
         /// Hidden size (regular fields of the encoder output).
         #[arg(long)]
         hidden: Option<usize>,
@@ -156,7 +177,7 @@ enum BagCommand {
         /// Bag directory or .mcap file.
         bag: std::path::PathBuf,
         /// Discount for episodes reconstructed from transitions.
-        #[arg(long, default_value_t = 0.99)]
+        #[arg(long, default_value_t = equiarm_sac::agent::GAMMA)]
         gamma: f64,
         /// Print JSON instead of a table.
         #[arg(long)]
@@ -172,8 +193,8 @@ enum BagCommand {
         net: String,
         /// An actor file's architecture: paper (hidden 64, 128 px) or reduced (the networks
         /// crate's reduced size: hidden 16, 64 px).
-        #[arg(long, default_value = "paper")]
-        config: String,
+        #[arg(long, value_enum, default_value_t = NetPreset::Paper)]
+        config: NetPreset,
     },
     /// Re-publishes a bag's messages on their topics at the recorded pace (like `ros2 bag play`).
     Play {
@@ -344,14 +365,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             batch,
             seed,
         }) => {
-            use equiarm_nn::nets::NetConfig;
-            let kind: equiarm_nn::diagnostics::NetKind = net.parse().map_err(anyhow::Error::msg)?;
-            let mut cfg = match (config.as_str(), kind) {
-                ("paper", equiarm_nn::diagnostics::NetKind::RotEqui) => NetConfig::paper_rotation(),
-                ("paper", _) => NetConfig::paper(),
-                ("reduced", _) => NetConfig::reduced_cpu(),
-                (other, _) => bail!("unknown --config '{other}': use paper or reduced"),
-            };
+            let kind: equiarm_nn::diagnostics::NetKind = net.parse()?;
+            let mut cfg = config.config(Some(kind));
             cfg.hidden = hidden.unwrap_or(cfg.hidden);
             cfg.input_size = size.unwrap_or(cfg.input_size);
             cfg.in_channels = channels.unwrap_or(cfg.in_channels);
@@ -361,7 +376,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let device = equiarm_nn::burn::tensor::Device::flex();
             let errors =
                 equiarm_nn::diagnostics::check_checkpoint(kind, &cfg, checkpoint.as_deref(), batch, seed, &device)
-                    .with_context(|| format!("checking the equivariance of {net} ({config} config)"))?;
+                    .with_context(|| format!("checking the equivariance of {net} ({config:?} config)"))?;
             println!("element (flip, rot)   relative error");
             for e in errors {
                 println!("({}, {})                {:.3e}", e.element.flip, e.element.rot, e.relative_error);
@@ -380,12 +395,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 let cfg = equiarm_nn::nets::NetConfig { hidden: a.hidden, input_size: a.input_size, in_channels: 5 };
                 (dir.join("actor.safetensors"), a.model.name().to_string(), cfg)
             } else {
-                let cfg = match config.as_str() {
-                    "paper" => equiarm_nn::nets::NetConfig::paper(),
-                    "reduced" => equiarm_nn::nets::NetConfig::reduced_cpu(),
-                    other => bail!("unknown --config '{other}': use paper or reduced"),
-                };
-                (ckpt, net, cfg)
+                (ckpt, net, config.config(None))
             };
             let a = equiarm_nodes::policy_eval::evaluate(&bag, &ckpt, &net, &cfg)
                 .with_context(|| format!("evaluating {} on {}", ckpt.display(), bag.display()))?;

@@ -351,7 +351,7 @@ fn the_trainer_stores_each_frame_once_keeps_only_successful_demos_and_never_the_
     // A malformed frame is refused with the reason.
     let mut bad = transition("env5", 0, 0, false, false);
     bad.obs.depth.encoding = "16UC1".into();
-    assert!(ing.transition(&bad).unwrap_err().contains("16UC1"));
+    assert!(ing.transition(&bad).unwrap_err().to_string().contains("16UC1"));
     let n = &ing.counts;
     assert_eq!((n.transitions, n.stored, n.expert_held, n.expert_dropped, n.eval, n.bad), (11, 7, 0, 2, 1, 1));
 }
@@ -391,7 +391,7 @@ fn the_policy_refuses_foreign_weights_and_answers_a_repeated_seq_identically() {
     // A malformed image is an error with the reason, not a panic.
     let mut bad = observation("env0", 0, 2, 42);
     bad.color.data.truncate(10);
-    assert!(policy.answer(&bad).unwrap_err().contains("colour"));
+    assert!(policy.answer(&bad).unwrap_err().to_string().contains("colour"));
     // Expert mode sends back the expert's action for that seq.
     let mut expert = Policy::new(PolicyMode::Expert, AgentConfig::default(), 152, None, 0).unwrap();
     let e = expert.answer(&observation("env0", 0, 4, 1)).unwrap();

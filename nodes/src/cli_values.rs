@@ -12,57 +12,92 @@ pub const MAX_RATE: f64 = 1000.0;
 /// Largest step budget accepted by the policy's flow control (`--max-lead`, `--steps-per-update`).
 pub const MAX_STEPS: u64 = 1_000_000;
 
+/// A command-line number refused: it does not parse, or it is outside the range the flag accepts.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum BadValue {
+    /// Not a number of the expected kind.
+    #[error("'{given}' is not a {kind}")]
+    NotANumber {
+        /// The text given.
+        given: String,
+        /// What was expected, e.g. `whole number of ms`.
+        kind: String,
+    },
+    /// A number outside the flag's range.
+    #[error("{given} is outside {range}")]
+    OutOfRange {
+        /// The value with its unit, e.g. `0 ms`.
+        given: String,
+        /// The accepted range with its meaning, e.g. `1..=3600000`.
+        range: String,
+    },
+}
+
 /// A duration in seconds: finite, above 0, at most [`MAX_SECONDS`].
-pub fn seconds(s: &str) -> Result<f64, String> {
+pub fn seconds(s: &str) -> Result<f64, BadValue> {
     let v = number(s, "number of seconds")?;
-    if v > 0.0 && v <= MAX_SECONDS { Ok(v) } else { Err(format!("{s} s is outside (0, {MAX_SECONDS}] (30 days)")) }
+    if v > 0.0 && v <= MAX_SECONDS {
+        Ok(v)
+    } else {
+        Err(BadValue::OutOfRange { given: format!("{s} s"), range: format!("(0, {MAX_SECONDS}] (30 days)") })
+    }
 }
 
 /// A whole number of seconds: 1 ..= [`MAX_SECONDS`].
-pub fn whole_seconds(s: &str) -> Result<u64, String> {
+pub fn whole_seconds(s: &str) -> Result<u64, BadValue> {
     bounded(s, "s", 1, MAX_SECONDS as u64)
 }
 
 /// An interval in milliseconds: 1 ..= [`MAX_MILLIS`].
-pub fn millis(s: &str) -> Result<u64, String> {
+pub fn millis(s: &str) -> Result<u64, BadValue> {
     bounded(s, "ms", 1, MAX_MILLIS)
 }
 
 /// An interval in milliseconds that may be 0 (no wait): 0 ..= [`MAX_MILLIS`].
-pub fn millis_or_zero(s: &str) -> Result<u64, String> {
+pub fn millis_or_zero(s: &str) -> Result<u64, BadValue> {
     bounded(s, "ms", 0, MAX_MILLIS)
 }
 
 /// A speed factor: finite, 0 (as fast as possible) ..= [`MAX_RATE`].
-pub fn rate(s: &str) -> Result<f64, String> {
+pub fn rate(s: &str) -> Result<f64, BadValue> {
     let v = number(s, "number")?;
     if (0.0..=MAX_RATE).contains(&v) {
         Ok(v)
     } else {
-        Err(format!("rate {s} is outside [0, {MAX_RATE}] (0: as fast as possible)"))
+        Err(BadValue::OutOfRange {
+            given: format!("rate {s}"),
+            range: format!("[0, {MAX_RATE}] (0: as fast as possible)"),
+        })
     }
 }
 
 /// A number that parses; NaN and the infinities come back as `NaN`, which no range contains.
-fn number(s: &str, what: &str) -> Result<f64, String> {
-    let v: f64 = s.trim().parse().map_err(|_| format!("'{s}' is not a {what}"))?;
+fn number(s: &str, what: &str) -> Result<f64, BadValue> {
+    let v: f64 = s.trim().parse().map_err(|_| BadValue::NotANumber { given: s.to_string(), kind: what.to_string() })?;
     Ok(if v.is_finite() { v } else { f64::NAN })
 }
 
 /// A step budget: 0 ..= [`MAX_STEPS`].
-pub fn steps(s: &str) -> Result<u64, String> {
+pub fn steps(s: &str) -> Result<u64, BadValue> {
     bounded(s, "steps", 0, MAX_STEPS)
 }
 
 /// A step count that must be at least 1: 1 ..= [`MAX_STEPS`].
-pub fn positive_steps(s: &str) -> Result<u64, String> {
+pub fn positive_steps(s: &str) -> Result<u64, BadValue> {
     bounded(s, "steps", 1, MAX_STEPS)
 }
 
 /// A whole number in `min ..= max` (`unit` only words the error).
-pub fn bounded(s: &str, unit: &str, min: u64, max: u64) -> Result<u64, String> {
-    let v: u64 = s.trim().parse().map_err(|_| format!("'{s}' is not a whole number of {unit}"))?;
-    if (min..=max).contains(&v) { Ok(v) } else { Err(format!("{v} {unit} is outside {min}..={max}")) }
+pub fn bounded(s: &str, unit: &str, min: u64, max: u64) -> Result<u64, BadValue> {
+    let v: u64 = s
+        .trim()
+        .parse()
+        .map_err(|_| BadValue::NotANumber { given: s.to_string(), kind: format!("whole number of {unit}") })?;
+    if (min..=max).contains(&v) {
+        Ok(v)
+    } else {
+        Err(BadValue::OutOfRange { given: format!("{v} {unit}"), range: format!("{min}..={max}") })
+    }
 }
 
 #[cfg(test)]
@@ -73,12 +108,12 @@ mod tests {
     fn durations_and_rates_outside_their_ranges_are_refused_with_the_range() {
         assert_eq!(seconds("2.5"), Ok(2.5));
         for bad in ["inf", "NaN", "-1", "0", "1e12", "ten"] {
-            let e = seconds(bad).unwrap_err();
+            let e = seconds(bad).unwrap_err().to_string();
             assert!(e.contains(bad) || e.contains("number"), "{bad}: {e}");
         }
         assert_eq!(millis("250"), Ok(250));
-        assert!(millis("0").unwrap_err().contains("1..=3600000"));
-        assert!(millis("18446744073709551615").unwrap_err().contains("outside"));
+        assert!(millis("0").unwrap_err().to_string().contains("1..=3600000"));
+        assert!(millis("18446744073709551615").unwrap_err().to_string().contains("outside"));
         assert!(millis("-5").is_err());
         assert_eq!(whole_seconds("60"), Ok(60));
         assert!(whole_seconds("0").is_err() && whole_seconds("2592001").is_err());

@@ -19,7 +19,7 @@ use crate::policy::Policy;
 
 /// Where a policy stands, as the gate needs it (see [`Policy::progress`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Progress {
+pub struct Standing {
     /// The Observation's seq is the last one answered (a re-publication).
     pub repeat: bool,
     /// Answering it is a learned/random policy step (not an expert step), counted by `--max-lead`.
@@ -94,7 +94,7 @@ impl Gate {
     }
 
     /// Whether an Observation at progress `p` may be answered now.
-    pub fn allows(&mut self, p: Progress, seq: u64) -> bool {
+    pub fn allows(&mut self, p: Standing, seq: u64) -> bool {
         if p.repeat {
             return true;
         }
@@ -143,8 +143,8 @@ impl Gate {
 mod tests {
     use super::*;
 
-    fn p(answered: u64, version: u64) -> Progress {
-        Progress { answered, version, policy_step: true, policy_steps: answered, repeat: false }
+    fn p(answered: u64, version: u64) -> Standing {
+        Standing { answered, version, policy_step: true, policy_steps: answered, repeat: false }
     }
 
     #[test]
@@ -157,9 +157,9 @@ mod tests {
         assert!(!g.allows(p(1, 1), 1));
         assert!(g.allows(p(1, 2), 1));
         // Expert steps count too: the 5th observation (k = 4) waits for version 5.
-        assert!(!g.allows(Progress { policy_step: false, ..p(4, 4) }, 9));
+        assert!(!g.allows(Standing { policy_step: false, ..p(4, 4) }, 9));
         // A re-publication of the seq just answered passes whatever the version.
-        assert!(g.allows(Progress { repeat: true, ..p(5, 5) }, 9));
+        assert!(g.allows(Standing { repeat: true, ..p(5, 5) }, 9));
         // A newer version than expected is an error in the log, but the node keeps answering.
         assert!(g.allows(p(2, 7), 3));
     }
@@ -171,7 +171,7 @@ mod tests {
         assert!(g.allows(p(100, 0), 0), "no status yet");
         g.on_status(1);
         assert!(g.allows(p(4, 0), 0) && !g.allows(p(5, 0), 0));
-        assert!(g.allows(Progress { policy_step: false, ..p(9, 0) }, 0), "expert steps are not limited");
+        assert!(g.allows(Standing { policy_step: false, ..p(9, 0) }, 0), "expert steps are not limited");
         assert_eq!(Gate::new(0, 1, false, false).unwrap().rule(), &Rule::Open);
     }
 

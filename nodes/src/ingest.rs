@@ -10,11 +10,10 @@ use std::sync::Arc;
 
 use equiarm_msgs::msg::{EpisodeResult, Observation, Transition};
 use equiarm_sac::config::TrainConfig;
-use equiarm_sac::frame::Frame;
+use equiarm_sac::frame::StoredFrame;
 use equiarm_sac::replay::Stored;
-use equiarm_sim::Action;
 
-use crate::policy::frame_of;
+use crate::policy::{BadFrame, action_of, frame_of};
 
 /// What the trainer did with the transitions it received (N = stored + held + dropped + eval + bad).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -42,7 +41,7 @@ pub struct Ingest {
     eval_env: String,
     image_size: usize,
     timeout_terminal: bool,
-    last_next: HashMap<String, (u64, Arc<Frame>)>,
+    last_next: HashMap<String, (u64, Arc<StoredFrame>)>,
     held: HashMap<Key, (Vec<Stored>, bool)>,
     decided: HashMap<Key, bool>,
     /// What happened so far.
@@ -69,7 +68,7 @@ impl Ingest {
         env == self.eval_env
     }
 
-    fn frame(&self, o: &Observation) -> Result<Arc<Frame>, String> {
+    fn frame(&self, o: &Observation) -> Result<Arc<StoredFrame>, BadFrame> {
         if let Some((seq, f)) = self.last_next.get(&o.env)
             && *seq == o.seq
         {
@@ -77,13 +76,13 @@ impl Ingest {
         }
         let f = frame_of(o)?;
         if f.size() != self.image_size {
-            return Err(format!("frame of {} px, the run's image_size is {}", f.size(), self.image_size));
+            return Err(BadFrame::Size { got: f.size(), want: self.image_size });
         }
         Ok(Arc::new(f))
     }
 
     /// The rows to store now for `t` (none for eval, held expert or malformed transitions).
-    pub fn transition(&mut self, t: &Transition) -> Result<Vec<Stored>, String> {
+    pub fn transition(&mut self, t: &Transition) -> Result<Vec<Stored>, BadFrame> {
         self.counts.transitions += 1;
         if self.is_eval(&t.obs.env) {
             self.counts.eval += 1;
@@ -92,8 +91,7 @@ impl Ingest {
         let frames = self.frame(&t.obs).and_then(|o| Ok((o, self.frame(&t.next_obs)?)));
         let (obs, next_obs) = frames.inspect_err(|_| self.counts.bad += 1)?;
         self.last_next.insert(t.next_obs.env.clone(), (t.next_obs.seq, next_obs.clone()));
-        let a = &t.action;
-        let action = Action::new(a.open_ratio, a.dx, a.dy, a.dz, a.dtheta).to_normalized();
+        let action = action_of(&t.action).to_normalized();
         let done = t.done || (t.timeout && self.timeout_terminal);
         let row = Stored { obs, next_obs, action, reward: t.reward, done, expert: t.expert };
         if !t.expert {

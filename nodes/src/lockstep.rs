@@ -20,6 +20,43 @@ use std::collections::{BTreeMap, VecDeque};
 
 use equiarm_msgs::msg::{EpisodeResult, Transition};
 
+/// A message the rounds refused, and why.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum Refused {
+    /// A message from an env beyond the run's `num_envs` training envs.
+    #[error("{what} from env '{env}' ignored: the run has num_envs = {num_envs} training envs ({known})")]
+    ExtraEnv {
+        /// The message, e.g. `transition (seq 4)`.
+        what: String,
+        /// Its env.
+        env: String,
+        /// The run's training envs.
+        num_envs: usize,
+        /// The envs known, comma-separated.
+        known: String,
+    },
+    /// A transition whose seq does not follow its env's last one.
+    #[error(
+        "transition of env '{env}' with seq {seq} ignored: it does not follow seq {last} (a repeat, or a restarted sim)"
+    )]
+    OutOfOrder {
+        /// Its env.
+        env: String,
+        /// Its seq.
+        seq: u64,
+        /// The env's last seq.
+        last: u64,
+    },
+    /// A second result for one episode.
+    #[error("a second EpisodeResult of env '{env}' episode {episode} ignored")]
+    SecondResult {
+        /// Its env.
+        env: String,
+        /// The episode.
+        episode: u32,
+    },
+}
+
 /// One message of a round, in processing order.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Item {
@@ -63,15 +100,16 @@ impl Lockstep {
     }
 
     /// The lane of `env`, creating it while fewer than `num_envs` envs are known.
-    fn lane(&mut self, env: &str, what: &str) -> Result<&mut Lane, String> {
+    fn lane(&mut self, env: &str, what: &str) -> Result<&mut Lane, Refused> {
         if !self.lanes.contains_key(env) {
             if self.lanes.len() >= self.num_envs {
                 let known: Vec<&str> = self.lanes.keys().map(String::as_str).collect();
-                return Err(format!(
-                    "{what} from env '{env}' ignored: the run has num_envs = {} training envs ({})",
-                    self.num_envs,
-                    known.join(", ")
-                ));
+                return Err(Refused::ExtraEnv {
+                    what: what.to_string(),
+                    env: env.to_string(),
+                    num_envs: self.num_envs,
+                    known: known.join(", "),
+                });
             }
             self.lanes.insert(env.to_string(), Lane::default());
         }
@@ -79,13 +117,11 @@ impl Lockstep {
     }
 
     /// Takes a training env's transition.
-    pub fn transition(&mut self, t: Transition) -> Result<(), String> {
+    pub fn transition(&mut self, t: Transition) -> Result<(), Refused> {
         let (env, seq) = (t.obs.env.clone(), t.obs.seq);
         let lane = self.lane(&env, &format!("transition (seq {seq})"))?;
         if let Some(last) = lane.last_seq.filter(|&last| seq <= last) {
-            return Err(format!(
-                "transition of env '{env}' with seq {seq} ignored: it does not follow seq {last} (a repeat, or a restarted sim)"
-            ));
+            return Err(Refused::OutOfOrder { env, seq, last });
         }
         lane.last_seq = Some(seq);
         lane.transitions.push_back(t);
@@ -93,11 +129,11 @@ impl Lockstep {
     }
 
     /// Takes a training env's episode result.
-    pub fn episode(&mut self, r: EpisodeResult) -> Result<(), String> {
+    pub fn episode(&mut self, r: EpisodeResult) -> Result<(), Refused> {
         let (env, episode) = (r.env.clone(), r.episode);
         let lane = self.lane(&env, &format!("EpisodeResult (episode {episode})"))?;
         if episode < lane.closed_below || lane.results.contains_key(&episode) {
-            return Err(format!("a second EpisodeResult of env '{env}' episode {episode} ignored"));
+            return Err(Refused::SecondResult { env, episode });
         }
         lane.results.insert(episode, r);
         Ok(())
@@ -220,16 +256,18 @@ mod tests {
     fn bad_input_is_refused_with_its_name_and_never_panics() {
         let mut a = Lockstep::new(1);
         a.transition(tr("env0", 0, 5, true)).unwrap();
-        let e = a.transition(tr("env9", 0, 0, false)).unwrap_err();
+        let e = a.transition(tr("env9", 0, 0, false)).unwrap_err().to_string();
         assert!(e.contains("'env9'") && e.contains("num_envs = 1") && e.contains("env0"), "{e}");
-        let e = a.episode(res("env9", 0)).unwrap_err();
+        let e = a.episode(res("env9", 0)).unwrap_err().to_string();
         assert!(e.contains("EpisodeResult") && e.contains("'env9'"), "{e}");
-        let e = a.transition(tr("env0", 0, 5, false)).unwrap_err();
+        let e = a.transition(tr("env0", 0, 5, false)).unwrap_err().to_string();
         assert!(e.contains("seq 5") && e.contains("does not follow"), "{e}");
         a.episode(res("env0", 0)).unwrap();
-        assert!(a.episode(res("env0", 0)).unwrap_err().contains("second EpisodeResult of env 'env0' episode 0"));
+        assert!(
+            a.episode(res("env0", 0)).unwrap_err().to_string().contains("second EpisodeResult of env 'env0' episode 0")
+        );
         assert_eq!(a.next_round().map(|r| r.len()), Some(2));
-        assert!(a.episode(res("env0", 0)).unwrap_err().contains("second"), "a result of a closed episode");
+        assert!(a.episode(res("env0", 0)).unwrap_err().to_string().contains("second"), "a result of a closed episode");
         assert_eq!(Lockstep::new(0).num_envs, 1);
     }
 }

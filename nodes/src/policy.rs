@@ -18,13 +18,14 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Context as _;
+use equiarm_msgs::ImageError;
 use equiarm_msgs::msg::{GripperCommand, Observation, PolicyWeights, TrainerStatus};
 use equiarm_sac::agent::{ActMode, Agent, AgentConfig, ModelKind};
-use equiarm_sac::frame::Frame;
+use equiarm_sac::frame::{FrameError, StoredFrame};
 use equiarm_sim::{Action, rng::Rng};
 use log::{info, warn};
 
-use crate::gate::{Gate, Progress};
+use crate::gate::{Gate, Standing};
 use crate::policy_cli::{PolicyArgs, architecture};
 use crate::ros::{Publisher, RosNode, RosOptions, Subscriber, qos, shutdown_signal};
 
@@ -41,18 +42,69 @@ pub enum PolicyMode {
     Random,
 }
 
+/// Why an Observation's images make no frame (or, at the trainer, not one of the run's size).
+#[derive(Debug, thiserror::Error)]
+pub enum BadFrame {
+    /// The colour image is not rgb8 of its stated size.
+    #[error("colour: {0}")]
+    Color(ImageError),
+    /// The depth image is not 32FC1 of its stated size.
+    #[error("depth: {0}")]
+    Depth(ImageError),
+    /// Colour and depth differ in size.
+    #[error("colour is {}×{}, depth {}×{}", color.0, color.1, depth.0, depth.1)]
+    Mismatch {
+        /// Colour width and height.
+        color: (u32, u32),
+        /// Depth width and height.
+        depth: (u32, u32),
+    },
+    /// Not square, too large, or a depth that is not finite.
+    #[error(transparent)]
+    Frame(#[from] FrameError),
+    /// A frame of another size than the run's (trainer).
+    #[error("frame of {got} px, the run's image_size is {want}")]
+    Size {
+        /// The frame's side.
+        got: usize,
+        /// The run's `image_size`.
+        want: usize,
+    },
+}
+
+/// Why the policy could not answer an Observation.
+#[derive(Debug, thiserror::Error)]
+pub enum AnswerError {
+    /// Its images make no frame.
+    #[error(transparent)]
+    Frame(#[from] BadFrame),
+    /// The actor failed on it.
+    #[error("acting: {0}")]
+    Act(#[from] equiarm_sac::learner::LearnerError),
+}
+
+/// The physical action a GripperCommand (or a Transition's action) carries.
+pub fn action_of(c: &GripperCommand) -> Action {
+    Action::new(c.open_ratio, c.dx, c.dy, c.dz, c.dtheta)
+}
+
 /// The frame of an Observation (rgb8 colour, 32FC1 depth, holding); the error says what is wrong.
-pub fn frame_of(obs: &Observation) -> Result<Frame, String> {
-    let color = obs.color.rgb8_data().map_err(|e| format!("colour: {e}"))?;
-    let depth = obs.depth.float32_values().map_err(|e| format!("depth: {e}"))?;
+pub fn frame_of(obs: &Observation) -> Result<StoredFrame, BadFrame> {
+    let color = obs.color.rgb8_data().map_err(BadFrame::Color)?;
+    let depth = obs.depth.float32_values().map_err(BadFrame::Depth)?;
     if (obs.color.width, obs.color.height) != (obs.depth.width, obs.depth.height) {
-        return Err(format!(
-            "colour is {}×{}, depth {}×{}",
-            obs.color.width, obs.color.height, obs.depth.width, obs.depth.height
-        ));
+        return Err(BadFrame::Mismatch {
+            color: (obs.color.width, obs.color.height),
+            depth: (obs.depth.width, obs.depth.height),
+        });
     }
-    Frame::from_image(obs.color.width as usize, obs.color.height as usize, color.to_vec(), &depth, obs.holding)
-        .map_err(|e| e.to_string())
+    Ok(StoredFrame::from_image(
+        obs.color.width as usize,
+        obs.color.height as usize,
+        color.to_vec(),
+        &depth,
+        obs.holding,
+    )?)
 }
 
 /// What became of a PolicyWeights sample.
@@ -125,10 +177,10 @@ impl Policy {
     }
 
     /// Where the node stands if it answered `obs` now (what [`crate::gate::Gate`] decides on).
-    pub fn progress(&self, obs: &Observation) -> Progress {
+    pub fn progress(&self, obs: &Observation) -> Standing {
         let repeat = self.last.as_ref().is_some_and(|(seq, _)| *seq == obs.seq);
         let policy_step = !repeat && self.mode != PolicyMode::Expert && obs.episode >= self.expert_episodes;
-        Progress {
+        Standing {
             repeat,
             policy_step,
             policy_steps: self.policy_steps,
@@ -148,7 +200,7 @@ impl Policy {
     }
 
     /// The command answering `obs` (the same one again for a re-published seq).
-    pub fn answer(&mut self, obs: &Observation) -> Result<GripperCommand, String> {
+    pub fn answer(&mut self, obs: &Observation) -> Result<GripperCommand, AnswerError> {
         if let Some((seq, cmd)) = &self.last
             && *seq == obs.seq
         {
@@ -185,7 +237,7 @@ impl Policy {
                     agent.config().input_size,
                 );
                 let t0 = Instant::now();
-                let u = equiarm_sac::learner::act_on(agent, &[&frame], s, act).map_err(|e| e.to_string())?;
+                let u = equiarm_sac::learner::act_on(agent, &[&frame], s, act)?;
                 self.record_latency(t0.elapsed().as_secs_f64());
                 (u[0], GripperCommand::SOURCE_POLICY)
             }

@@ -1,10 +1,10 @@
 //! `equiarm bag eval BAG --policy CKPT`: runs an actor over the observations recorded in a bag's
 //! `Transition`s and reports, per action dimension, how its greedy action (tanh of the mean) agrees
 //! with the action that was recorded, both in the agent's normalised [-1, 1] units
-//! (p = 2·open_ratio − 1, dx/0.05, dy/0.05, dz/0.05, dθ/(π/4), docs/paper.md §1.2).
+//! (`Action::to_normalized`, docs/paper.md §1.2).
 //!
-//! Network input, as the paper feeds it (docs/paper.md §1.1): channels R, G, B (÷255), depth (m) and
-//! the holding flag as a constant plane, centre-cropped to the network's input size.
+//! Network input: the one acting uses (`equiarm_sac::augment::centre_input` of the Observation's
+//! frame as the replay stores it, depth in f16), so the actor sees what it saw in training.
 //!
 //! ## Limitations
 //! The architecture is given on the command line (`--net`, `--config`): the checkpoint file holds
@@ -19,6 +19,9 @@ use equiarm_msgs::{RosMessage, cdr};
 use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
 use equiarm_nn::init::Init;
 use equiarm_nn::nets::{Actor, CnnActor, EquiActor, NetConfig};
+use equiarm_sac::augment::centre_input;
+
+use crate::policy::{action_of, frame_of};
 
 /// Transitions evaluated per forward pass.
 const BATCH: usize = 32;
@@ -28,35 +31,16 @@ pub const DIMS: [&str; 5] = ["p", "dx", "dy", "dz", "dtheta"];
 
 /// The recorded action in the agent's normalised units.
 pub fn normalised(c: &GripperCommand) -> [f32; 5] {
-    [2.0 * c.open_ratio - 1.0, c.dx / 0.05, c.dy / 0.05, c.dz / 0.05, c.dtheta / std::f32::consts::FRAC_PI_4]
+    action_of(c).to_normalized()
 }
 
-/// The 5 × S × S network input of an observation (centre crop to `size`).
+/// The 5 × S × S network input of an observation (centre crop to `size`), as acting builds it.
 pub fn network_input(obs: &Observation, size: usize) -> anyhow::Result<Vec<f32>> {
-    let rgb = obs.color.rgb8_data().context("observation colour")?;
-    let depth = obs.depth.float32_values().context("observation depth")?;
-    let (h, w) = (obs.color.height as usize, obs.color.width as usize);
-    if (obs.depth.height as usize, obs.depth.width as usize) != (h, w) {
-        bail!("colour is {h}x{w} but depth is {}x{}", obs.depth.height, obs.depth.width);
+    let frame = frame_of(obs)?;
+    if frame.size() < size {
+        bail!("observation of {0}x{0} px is smaller than the network's {size}x{size} input", frame.size());
     }
-    if h < size || w < size {
-        bail!("observation of {h}x{w} px is smaller than the network's {size}x{size} input");
-    }
-    let (r0, c0) = ((h - size) / 2, (w - size) / 2);
-    let plane = size * size;
-    let mut x = vec![0f32; 5 * plane];
-    for r in 0..size {
-        for c in 0..size {
-            let src = (r0 + r) * w + (c0 + c);
-            let dst = r * size + c;
-            for ch in 0..3 {
-                x[ch * plane + dst] = rgb[3 * src + ch] as f32 / 255.0;
-            }
-            x[3 * plane + dst] = depth[src];
-            x[4 * plane + dst] = obs.holding as u8 as f32;
-        }
-    }
-    Ok(x)
+    Ok(centre_input(&[&frame], size)?)
 }
 
 /// Per-dimension agreement between the policy and the recorded actions.

@@ -40,8 +40,6 @@ use log::{debug, info, warn};
 
 use crate::ros::{Publisher, RosNode, RosOptions, qos, shutdown_signal};
 
-/// Discount of `EpisodeResult.discounted_return` (the trainer's gamma, docs/paper.md §2).
-pub const GAMMA: f32 = 0.99;
 /// Frame of observations, transitions and commands.
 pub const WORLD_FRAME: &str = "world";
 /// Frame of the camera images and `CameraInfo` (optical convention: z forward, x right, y down).
@@ -270,7 +268,7 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
             all_expert &= cmd.source == GripperCommand::SOURCE_EXPERT;
             ret += r.reward;
             disc += discount * r.reward;
-            discount *= GAMMA;
+            discount *= equiarm_sac::agent::GAMMA as f32;
             seq += 1;
             let steps = r.observation.step;
             let next = observation(r.observation, seq, &env_name, episode, clock.tick())?;

@@ -62,6 +62,10 @@ pub struct TrainArgs {
     /// Adam learning rate of the critic, actor and α (the paper's: 1e-3).
     #[arg(long)]
     pub lr: Option<f64>,
+    /// Anneal the learning rate from --lr to this value over the run (half cosine); `none` keeps it
+    /// constant (the paper).
+    #[arg(long, value_name = "LR|none")]
+    pub lr_final: Option<String>,
     /// Rendered frame size and network input size, as FRAME:INPUT (e.g. 76:64, 152:128).
     #[arg(long)]
     pub image: Option<String>,
@@ -150,6 +154,12 @@ impl TrainArgs {
         set!(seed => seed, total_updates => total_updates, num_envs => num_envs, eval_every => eval_every,
              eval_episodes => eval_episodes, demo_episodes => demo_episodes, batch_size => batch_size,
              hidden => agent.hidden, lr => agent.lr, checkpoint_every => checkpoint_every, training_starts => training_starts);
+        if let Some(f) = &self.lr_final {
+            cfg.agent.lr_final = match f.as_str() {
+                "none" => None,
+                v => Some(v.parse().with_context(|| format!("--lr-final `{v}`: expected a number or `none`"))?),
+            };
+        }
         if let Some(img) = &self.image {
             let (f, i) = img
                 .split_once(':')
@@ -298,6 +308,12 @@ mod tests {
         assert!(e.contains("agent.lr"), "{e}");
         let e = config(&["--image", "76"]).unwrap_err().to_string();
         assert!(e.contains("--image"), "{e}");
+        let e = config(&["--lr-final", "0.01"]).unwrap_err().to_string();
+        assert!(e.contains("agent.lr_final") && e.contains("at most agent.lr"), "{e}");
+        let e = config(&["--lr-final", "fast"]).unwrap_err().to_string();
+        assert!(e.contains("--lr-final") && e.contains("fast"), "{e}");
+        assert_eq!(config(&["--lr-final", "none"]).unwrap().agent.lr_final, None);
+        assert_eq!(config(&["--lr-final", "1e-4"]).unwrap().agent.lr_final, Some(1e-4));
         let e = config(&["--preset", "huge"]).unwrap_err().to_string();
         assert!(e.contains("huge"), "{e}");
     }

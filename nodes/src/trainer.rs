@@ -90,7 +90,7 @@ fn start_update(home: &mut Option<Learner>) -> Option<Update> {
 fn ingest_transition(ingest: &mut Ingest, t: &Transition, queue: &mut Vec<Stored>, bad_logged: &mut HashSet<String>) {
     match ingest.transition(t) {
         Ok(rows) => queue.extend(rows),
-        Err(e) if bad_logged.insert(e.clone()) => {
+        Err(e) if bad_logged.insert(e.to_string()) => {
             warn!("skipping a transition of '{}' (seq {}): {e}", t.obs.env, t.obs.seq)
         }
         Err(_) => {}
@@ -118,7 +118,7 @@ fn ingest_episode(
 }
 
 /// Lock-step: counts a message the rounds refused and logs it (the 1st, 2nd, 4th, 8th, …).
-fn log_refused(r: Result<(), String>, refused: &mut u64) {
+fn log_refused(r: Result<(), crate::lockstep::Refused>, refused: &mut u64) {
     if let Err(e) = r {
         *refused += 1;
         if refused.is_power_of_two() {
@@ -171,7 +171,7 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     let started = Instant::now();
     let dir = args.run_dir();
     let _claim = equiarm_sac::train::RunDirLock::acquire_for(&dir, args.resume.as_deref(), args.force)?;
-    write_json(&dir.join("config.json"), &cfg).map_err(anyhow::Error::msg)?;
+    write_json(&dir.join("config.json"), &cfg)?;
     let mut learner = Learner::with_device(cfg.clone(), args.device.clone())?;
     let mut st = NodeState::default();
     let mut metrics = match &args.resume {
@@ -444,7 +444,7 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     if last_ck.as_ref().is_none_or(|p: &PathBuf| !p.ends_with(step_dir_name(learner.updates()))) {
         last_ck = Some(checkpoint(&learner, &st, &dir)?);
     }
-    write_json(&dir.join("evals.json"), &st.evals).map_err(anyhow::Error::msg)?;
+    write_json(&dir.join("evals.json"), &st.evals)?;
     // The curve is redrawn at every evaluation; draw it at the end too (a run may end before one).
     write_curve(&dir, &cfg, &st.evals)?;
     if let Some(ls) = &lockstep {
@@ -493,7 +493,7 @@ fn evaluation(episodes: &[EpisodeResult], updates: u64) -> EvalResult {
 fn checkpoint(learner: &Learner, st: &NodeState, run_dir: &Path) -> anyhow::Result<PathBuf> {
     let dir = run_dir.join("checkpoints").join(step_dir_name(learner.updates()));
     learner.save(&dir)?;
-    write_json(&dir.join("trainer.json"), st).map_err(anyhow::Error::msg)?;
+    write_json(&dir.join("trainer.json"), st)?;
     write_latest(run_dir, learner.updates())?;
     info!("checkpoint {}", dir.display());
     Ok(dir)

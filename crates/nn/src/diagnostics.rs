@@ -135,16 +135,21 @@ pub enum NetKind {
 }
 
 impl std::str::FromStr for NetKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownNet;
+    fn from_str(s: &str) -> Result<Self, UnknownNet> {
         match s {
             "equi-actor" => Ok(NetKind::EquiActor),
             "equi-critic" => Ok(NetKind::EquiCritic),
             "rot-equi" => Ok(NetKind::RotEqui),
-            other => Err(format!("unknown network `{other}`: expected equi-actor, equi-critic or rot-equi")),
+            other => Err(UnknownNet(other.to_string())),
         }
     }
 }
+
+/// A word that names no [`NetKind`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown network `{0}`: expected equi-actor, equi-critic or rot-equi")]
+pub struct UnknownNet(pub String);
 
 /// Errors of [`check_checkpoint`].
 #[derive(Debug, thiserror::Error)]

@@ -35,14 +35,14 @@ struct Args {
     model: Option<ModelKind>,
 }
 
-fn parse_sizes(s: &str) -> Result<(usize, usize), String> {
-    let bad = || format!("expected FRAME:INPUT (two pixel sizes, e.g. 38:32), got `{s}`");
+fn parse_sizes(s: &str) -> anyhow::Result<(usize, usize)> {
+    let bad = || anyhow::anyhow!("expected FRAME:INPUT (two pixel sizes, e.g. 38:32), got `{s}`");
     let (f, i) = s.split_once(':').ok_or_else(bad)?;
     Ok((f.parse().map_err(|_| bad())?, i.parse().map_err(|_| bad())?))
 }
 
-fn parse_model(s: &str) -> Result<ModelKind, String> {
-    ModelKind::parse(s).ok_or_else(|| format!("unknown model `{s}` (equi, cnn or sen)"))
+fn parse_model(s: &str) -> anyhow::Result<ModelKind> {
+    ModelKind::parse(s).ok_or_else(|| anyhow::anyhow!("unknown model `{s}` (equi, cnn or sen)"))
 }
 
 fn main() {
@@ -91,9 +91,9 @@ fn main() {
     // of the greedy action across those observations: a spread near 0 means the actor ignores its
     // input (only biases have learned).
     let greedy = |l: &mut Learner| {
-        let rows: Vec<(std::sync::Arc<equiarm_sac::frame::Frame>, [f32; 5])> =
+        let rows: Vec<(std::sync::Arc<equiarm_sac::frame::StoredFrame>, [f32; 5])> =
             (0..l.replay().len()).filter_map(|i| l.replay().get(i).map(|t| (t.obs.clone(), t.action))).collect();
-        let frames: Vec<&equiarm_sac::frame::Frame> = rows.iter().map(|r| &*r.0).collect();
+        let frames: Vec<&equiarm_sac::frame::StoredFrame> = rows.iter().map(|r| &*r.0).collect();
         let acts = l.act(&frames, equiarm_sac::agent::ActMode::Greedy).unwrap();
         let n = rows.len() as f64;
         let mut se = [0f64; 5];

@@ -43,10 +43,11 @@ struct Group {
     dirs: Vec<PathBuf>,
 }
 
-fn parse_group(s: &str) -> Result<Group, String> {
-    let (label, dirs) = s.split_once('=').ok_or_else(|| format!("expected LABEL=RUN_DIR[,RUN_DIR...], got `{s}`"))?;
+fn parse_group(s: &str) -> anyhow::Result<Group> {
+    let bad = || anyhow::anyhow!("expected LABEL=RUN_DIR[,RUN_DIR...], got `{s}`");
+    let (label, dirs) = s.split_once('=').ok_or_else(bad)?;
     if label.is_empty() || dirs.is_empty() {
-        return Err(format!("expected LABEL=RUN_DIR[,RUN_DIR...], got `{s}`"));
+        return Err(bad());
     }
     Ok(Group { label: label.to_string(), dirs: dirs.split(',').map(PathBuf::from).collect() })
 }

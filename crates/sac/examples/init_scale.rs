@@ -23,7 +23,7 @@ fn main() {
         let o = env.reset(s).unwrap();
         frames.push(equiarm_sac::train::frame_of(&o).unwrap());
     }
-    let refs: Vec<&equiarm_sac::frame::Frame> = frames.iter().map(|f| &**f).collect();
+    let refs: Vec<&equiarm_sac::frame::StoredFrame> = frames.iter().map(|f| &**f).collect();
     let c = equiarm_sac::augment::center_offset(frame, input);
     let x = equiarm_sac::augment::network_input(&refs, &[(c, c); 8], input).unwrap();
     let dev = Device::flex();

@@ -124,6 +124,10 @@ pub enum ActMode {
     Greedy,
 }
 
+/// The paper's discount (docs/paper.md §2): SAC's γ by default, and the discount of every reported
+/// discounted return (the sim node's `EpisodeResult`, the in-process evaluations).
+pub const GAMMA: f64 = 0.99;
+
 /// SAC hyper-parameters (docs/paper.md §2). Every field has the paper's value by default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -136,6 +140,10 @@ pub struct AgentConfig {
     pub input_size: usize,
     /// Adam learning rate of actor, critic and α.
     pub lr: f64,
+    /// Where the learning rate ends: `None` keeps `lr` throughout (the paper); `Some(f)` anneals it
+    /// from `lr` to `f` over the run's updates along a half cosine ([`crate::schedule::CosineSchedule`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lr_final: Option<f64>,
     /// Discount.
     pub gamma: f64,
     /// Polyak coefficient of the target critic.
@@ -157,7 +165,8 @@ impl Default for AgentConfig {
             hidden: 64,
             input_size: 128,
             lr: 1e-3,
-            gamma: 0.99,
+            lr_final: None,
+            gamma: GAMMA,
             tau: 0.01,
             init_alpha: 1e-2,
             target_entropy: -5.0,
@@ -387,6 +396,14 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         self.updates
     }
 
+    /// Set the Adam step size of actor, critic and α for the following updates (the learner's
+    /// learning-rate schedule). The moments are untouched.
+    pub fn set_lr(&mut self, lr: f64) {
+        self.actor_opt.set_lr(lr);
+        self.critic_opt.set_lr(lr);
+        self.alpha_opt.set_lr(lr);
+    }
+
     /// The device the agent's tensors live on (without autodiff).
     pub fn device(&self) -> &Device {
         &self.plain
@@ -608,8 +625,8 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
             .map_err(|e| AgentError::State { path: path.clone(), message: e.to_string() })?;
         let state: AgentState = serde_json::from_str(&text)
             .map_err(|e| AgentError::State { path: path.clone(), message: e.to_string() })?;
-        let rng =
-            crate::rng::load_state(&state.rng).map_err(|message| AgentError::State { path: path.clone(), message })?;
+        let rng = crate::rng::load_state(&state.rng)
+            .map_err(|e| AgentError::State { path: path.clone(), message: e.to_string() })?;
         let actor = equiarm_nn::checkpoint::load(self.actor.clone(), &dir.join("actor.safetensors"))?;
         let critic = equiarm_nn::checkpoint::load(self.critic.clone(), &dir.join("critic.safetensors"))?;
         let target = equiarm_nn::checkpoint::load(self.target.clone(), &dir.join("critic_target.safetensors"))?;
@@ -711,6 +728,11 @@ impl Agent {
     /// Current α.
     pub fn alpha(&self) -> f64 {
         each!(self, a => a.alpha())
+    }
+
+    /// See [`Sac::set_lr`].
+    pub fn set_lr(&mut self, lr: f64) {
+        each!(self, a => a.set_lr(lr))
     }
 
     /// See [`Sac::act`].

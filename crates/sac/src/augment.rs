@@ -10,7 +10,7 @@
 //! - Batch assembly is single-threaded: about 1 ms for 128 crops of 64 px and 6-9 ms for 128 crops
 //!   of 128 px into a reused buffer ([`network_input_into`]) on the 2-core dev machine under load.
 
-use crate::frame::{Frame, FrameError, PLANES};
+use crate::frame::{FrameError, PLANES, StoredFrame};
 
 /// Errors from building a network input batch.
 #[derive(Debug, thiserror::Error, Clone, PartialEq)]
@@ -49,6 +49,19 @@ pub fn center_offset(size: usize, out: usize) -> usize {
     size.saturating_sub(out) / 2
 }
 
+/// The network input of `frames` centre-cropped to `out` (acting, evaluation and `bag eval`: the
+/// frames as the networks see them outside training, docs/paper.md §1.1).
+pub fn centre_input(frames: &[&StoredFrame], out: usize) -> Result<Vec<f32>, AugmentError> {
+    let offsets: Vec<(usize, usize)> = frames
+        .iter()
+        .map(|f| {
+            let c = center_offset(f.size(), out);
+            (c, c)
+        })
+        .collect();
+    network_input(frames, &offsets, out)
+}
+
 /// A RAD crop offset `(row0, col0)`, uniform in `{0..=size-out}²`. Returns `(0, 0)` when
 /// `out >= size` ([`network_input`] then reports a crop that does not fit).
 pub fn random_offset(rng: &mut impl rand::Rng, size: usize, out: usize) -> (usize, usize) {
@@ -57,10 +70,14 @@ pub fn random_offset(rng: &mut impl rand::Rng, size: usize, out: usize) -> (usiz
 }
 
 /// Builds the network input batch `[B, 5, out, out]` (row-major `f32`, B = `frames.len()`) with
-/// frame `i` cropped at `offsets[i]` = `(row0, col0)`; see [`Frame::write_planes`].
+/// frame `i` cropped at `offsets[i]` = `(row0, col0)`; see [`StoredFrame::write_planes`].
 ///
 /// Errors if the lengths differ, `out` is 0 or larger than a frame, or a window does not fit.
-pub fn network_input(frames: &[&Frame], offsets: &[(usize, usize)], out: usize) -> Result<Vec<f32>, AugmentError> {
+pub fn network_input(
+    frames: &[&StoredFrame],
+    offsets: &[(usize, usize)],
+    out: usize,
+) -> Result<Vec<f32>, AugmentError> {
     let mut batch = Vec::new();
     network_input_into(frames, offsets, out, &mut batch)?;
     Ok(batch)
@@ -72,7 +89,7 @@ pub fn network_input(frames: &[&Frame], offsets: &[(usize, usize)], out: usize) 
 /// NOTE: a fresh allocation of a paper-size batch (128 × 5 × 128², 42 MB) costs more in page faults
 /// than the decoding itself (measured ≈ 5× on the dev machine), hence this variant.
 pub fn network_input_into(
-    frames: &[&Frame],
+    frames: &[&StoredFrame],
     offsets: &[(usize, usize)],
     out: usize,
     dst: &mut Vec<f32>,
@@ -98,7 +115,7 @@ mod tests {
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
-    fn pattern(size: usize, holding: bool, salt: u8) -> Frame {
+    fn pattern(size: usize, holding: bool, salt: u8) -> StoredFrame {
         let mut color = Vec::with_capacity(size * size * 3);
         let mut depth = Vec::with_capacity(size * size);
         for r in 0..size {
@@ -107,7 +124,7 @@ mod tests {
                 depth.push(0.5 + r as f32 * 0.125);
             }
         }
-        Frame::new(size, color, &depth, holding).unwrap()
+        StoredFrame::new(size, color, &depth, holding).unwrap()
     }
 
     #[test]

@@ -8,16 +8,16 @@
 //! - Depth is kept as `f16`: about 1 mm resolution at 1-2 m and 2 mm at 2-4 m, which is below the
 //!   renderer's own precision for the paper's 0.1-3 m range. A depth whose `f16` is not finite
 //!   (above 65504 m) is rejected.
-//! - Sizes above [`Frame::MAX_SIZE`] are refused so a corrupted checkpoint cannot request a huge
+//! - Sizes above [`StoredFrame::MAX_SIZE`] are refused so a corrupted checkpoint cannot request a huge
 //!   allocation.
 
 use half::f16;
 use half::slice::HalfFloatSliceExt;
 
-/// Errors from building a [`Frame`] or decoding a window of it.
+/// Errors from building a [`StoredFrame`] or decoding a window of it.
 #[derive(Debug, thiserror::Error, Clone, PartialEq)]
 pub enum FrameError {
-    /// The frame size is 0 or above [`Frame::MAX_SIZE`].
+    /// The frame size is 0 or above [`StoredFrame::MAX_SIZE`].
     #[error("frame size {size} is outside 1..={max}")]
     BadSize {
         /// The size asked for.
@@ -72,14 +72,14 @@ pub enum FrameError {
 /// A square camera frame: rgb8 colour (row-major, `size*size*3`), depth in metres as `f16`
 /// (row-major, `size*size`) and the holding flag.
 #[derive(Clone, PartialEq)]
-pub struct Frame {
+pub struct StoredFrame {
     size: usize,
     color: Vec<u8>,
     depth: Vec<f16>,
     holding: bool,
 }
 
-impl std::fmt::Debug for Frame {
+impl std::fmt::Debug for StoredFrame {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Frame").field("size", &self.size).field("holding", &self.holding).finish_non_exhaustive()
     }
@@ -99,22 +99,22 @@ static U8_TO_UNIT: [f32; 256] = {
     t
 };
 
-impl Frame {
+impl StoredFrame {
     /// The largest frame side accepted (4096 px: 84 MB per frame).
     pub const MAX_SIZE: usize = 4096;
 
     /// Builds a frame from rgb8 colour (`size*size*3`, row-major) and depth in metres
     /// (`size*size`, row-major), converting depth to `f16`.
     ///
-    /// Errors: size 0 or above [`Frame::MAX_SIZE`], a wrong buffer length (naming expected and
+    /// Errors: size 0 or above [`StoredFrame::MAX_SIZE`], a wrong buffer length (naming expected and
     /// got), or a depth that is not finite after conversion (naming the pixel).
-    pub fn new(size: usize, color: Vec<u8>, depth_m: &[f32], holding: bool) -> Result<Frame, FrameError> {
+    pub fn new(size: usize, color: Vec<u8>, depth_m: &[f32], holding: bool) -> Result<StoredFrame, FrameError> {
         check_size(size)?;
         let n = size * size;
         check_len("depth", n, depth_m.len())?;
         let mut depth = vec![f16::ZERO; n];
         depth.convert_from_f32_slice(depth_m);
-        Frame::from_f16(size, color, depth, holding).map_err(|e| match e {
+        StoredFrame::from_f16(size, color, depth, holding).map_err(|e| match e {
             // Report the metres the caller gave, not the f16 infinity they became.
             FrameError::NonFiniteDepth { index, row, col, .. } => {
                 FrameError::NonFiniteDepth { index, row, col, value: depth_m[index] }
@@ -123,23 +123,23 @@ impl Frame {
         })
     }
 
-    /// Like [`Frame::new`] for a `width × height` image; errors unless `width == height`.
+    /// Like [`StoredFrame::new`] for a `width × height` image; errors unless `width == height`.
     pub fn from_image(
         width: usize,
         height: usize,
         color: Vec<u8>,
         depth_m: &[f32],
         holding: bool,
-    ) -> Result<Frame, FrameError> {
+    ) -> Result<StoredFrame, FrameError> {
         if width != height {
             return Err(FrameError::NotSquare { width, height });
         }
-        Frame::new(width, color, depth_m, holding)
+        StoredFrame::new(width, color, depth_m, holding)
     }
 
     /// Builds a frame from depth already in `f16` metres (used when loading checkpoints); the same
-    /// checks as [`Frame::new`].
-    pub fn from_f16(size: usize, color: Vec<u8>, depth: Vec<f16>, holding: bool) -> Result<Frame, FrameError> {
+    /// checks as [`StoredFrame::new`].
+    pub fn from_f16(size: usize, color: Vec<u8>, depth: Vec<f16>, holding: bool) -> Result<StoredFrame, FrameError> {
         check_size(size)?;
         let n = size * size;
         check_len("color", n * 3, color.len())?;
@@ -152,7 +152,7 @@ impl Frame {
                 value: depth[index].to_f32(),
             });
         }
-        Ok(Frame { size, color, depth, holding })
+        Ok(StoredFrame { size, color, depth, holding })
     }
 
     /// Side of the square frame in pixels.
@@ -221,8 +221,8 @@ impl Frame {
 }
 
 fn check_size(size: usize) -> Result<(), FrameError> {
-    if size == 0 || size > Frame::MAX_SIZE {
-        return Err(FrameError::BadSize { size, max: Frame::MAX_SIZE });
+    if size == 0 || size > StoredFrame::MAX_SIZE {
+        return Err(FrameError::BadSize { size, max: StoredFrame::MAX_SIZE });
     }
     Ok(())
 }
@@ -239,7 +239,7 @@ mod tests {
     use super::*;
 
     /// A frame whose colour encodes the pixel position and whose depth is `row + col/1000`-ish.
-    fn pattern(size: usize, holding: bool) -> Frame {
+    fn pattern(size: usize, holding: bool) -> StoredFrame {
         let mut color = Vec::with_capacity(size * size * 3);
         let mut depth = Vec::with_capacity(size * size);
         for r in 0..size {
@@ -248,29 +248,32 @@ mod tests {
                 depth.push(0.25 * ((r + c) % 8) as f32);
             }
         }
-        Frame::new(size, color, &depth, holding).unwrap()
+        StoredFrame::new(size, color, &depth, holding).unwrap()
     }
 
     #[test]
     fn new_rejects_wrong_lengths_and_non_finite_depth() {
-        let e = Frame::new(4, vec![0; 47], &[0.0; 16], false).unwrap_err();
+        let e = StoredFrame::new(4, vec![0; 47], &[0.0; 16], false).unwrap_err();
         assert_eq!(e, FrameError::Length { what: "color", expected: 48, got: 47 });
-        let e = Frame::new(4, vec![0; 48], &[0.0; 15], false).unwrap_err();
+        let e = StoredFrame::new(4, vec![0; 48], &[0.0; 15], false).unwrap_err();
         assert_eq!(e, FrameError::Length { what: "depth", expected: 16, got: 15 });
         let mut d = [1.0f32; 16];
         d[6] = f32::NAN;
-        match Frame::new(4, vec![0; 48], &d, false).unwrap_err() {
+        match StoredFrame::new(4, vec![0; 48], &d, false).unwrap_err() {
             FrameError::NonFiniteDepth { index, row, col, .. } => assert_eq!((index, row, col), (6, 1, 2)),
             e => panic!("unexpected {e}"),
         }
         d[6] = 1.0e6; // overflows f16
-        assert!(matches!(Frame::new(4, vec![0; 48], &d, false), Err(FrameError::NonFiniteDepth { index: 6, .. })));
-        assert!(matches!(Frame::new(0, vec![], &[], false), Err(FrameError::BadSize { .. })));
+        assert!(matches!(
+            StoredFrame::new(4, vec![0; 48], &d, false),
+            Err(FrameError::NonFiniteDepth { index: 6, .. })
+        ));
+        assert!(matches!(StoredFrame::new(0, vec![], &[], false), Err(FrameError::BadSize { .. })));
         assert_eq!(
-            Frame::from_image(4, 3, vec![0; 36], &[0.0; 12], false).unwrap_err(),
+            StoredFrame::from_image(4, 3, vec![0; 36], &[0.0; 12], false).unwrap_err(),
             FrameError::NotSquare { width: 4, height: 3 }
         );
-        assert!(Frame::from_image(4, 4, vec![0; 48], &[0.5; 16], true).is_ok());
+        assert!(StoredFrame::from_image(4, 4, vec![0; 48], &[0.5; 16], true).is_ok());
     }
 
     #[test]

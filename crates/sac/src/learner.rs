@@ -19,11 +19,11 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::agent::{ActMode, Agent, AgentError, Batch, Metrics};
-use crate::augment::{center_offset, network_input, random_offset};
+use crate::augment::{center_offset, centre_input, network_input, random_offset};
 use crate::config::{Augmentation, TrainConfig};
-use crate::frame::Frame;
+use crate::frame::StoredFrame;
 use crate::replay::{Replay, Stored};
-use crate::schedule::Linear;
+use crate::schedule::{CosineSchedule, LinearSchedule};
 
 /// Version of the checkpoint layout written by this crate.
 pub const CHECKPOINT_FORMAT: u32 = 1;
@@ -91,7 +91,7 @@ pub struct Learner {
     agent: Agent,
     replay: Replay,
     rng: ChaCha8Rng,
-    beta: Linear,
+    beta: LinearSchedule,
     transitions: u64,
     last: Option<Metrics>,
 }
@@ -109,7 +109,7 @@ impl Learner {
         cfg.validate()?;
         let agent = Agent::new_on(cfg.agent.clone(), cfg.seed, &device)?;
         let replay = Replay::new(cfg.replay.clone())?;
-        let beta = Linear { start: cfg.replay.beta_start, end: cfg.replay.beta_end, steps: cfg.total_updates };
+        let beta = LinearSchedule { start: cfg.replay.beta_start, end: cfg.replay.beta_end, steps: cfg.total_updates };
         Ok(Learner {
             rng: crate::rng::stream(cfg.seed, 0x7265_706c),
             cfg,
@@ -169,13 +169,17 @@ impl Learner {
     }
 
     /// Actions for `frames` with a centre crop (acting and evaluation, docs/paper.md §1.1).
-    pub fn act(&mut self, frames: &[&Frame], mode: ActMode) -> Result<Vec<[f32; 5]>, LearnerError> {
+    pub fn act(&mut self, frames: &[&StoredFrame], mode: ActMode) -> Result<Vec<[f32; 5]>, LearnerError> {
         act_on(&mut self.agent, frames, self.cfg.agent.input_size, mode)
     }
 
     /// Sample a batch, crop it, update the agent and the priorities.
     pub fn update(&mut self) -> Result<Metrics, LearnerError> {
         let beta = self.beta.value(self.agent.updates());
+        if let Some(end) = self.cfg.agent.lr_final {
+            let lr = CosineSchedule { start: self.cfg.agent.lr, end, steps: self.cfg.total_updates };
+            self.agent.set_lr(lr.value(self.agent.updates()));
+        }
         let sample = self.replay.sample(self.cfg.batch_size, beta, &mut self.rng)?;
         let batch = self.build_batch(&sample.slots, &sample.weights)?;
         let (metrics, td) = self.agent.update(batch)?;
@@ -255,8 +259,8 @@ impl Learner {
 
     /// Write a checkpoint into `dir` (created; an existing one is replaced file by file).
     pub fn save(&self, dir: &Path) -> Result<(), LearnerError> {
-        let ck = |message: String| LearnerError::Checkpoint { path: dir.into(), message };
-        std::fs::create_dir_all(dir).map_err(|e| ck(e.to_string()))?;
+        let ck = |e: &dyn std::fmt::Display| LearnerError::Checkpoint { path: dir.into(), message: e.to_string() };
+        std::fs::create_dir_all(dir).map_err(|e| ck(&e))?;
         self.agent.save(dir)?;
         self.replay.save(&dir.join("replay.bin.zst"))?;
         let state = LearnerState {
@@ -264,7 +268,7 @@ impl Learner {
             transitions: self.transitions,
             rng: crate::rng::save_state(&self.rng),
         };
-        write_json(&dir.join("learner.json"), &state).map_err(ck)?;
+        write_json(&dir.join("learner.json"), &state).map_err(|e| ck(&e))?;
         let manifest = Manifest {
             format: CHECKPOINT_FORMAT,
             equiarm_version: env!("CARGO_PKG_VERSION").into(),
@@ -276,7 +280,7 @@ impl Learner {
             replay_len: self.replay.len(),
             expert_len: self.replay.expert_len(),
         };
-        write_json(&dir.join("manifest.json"), &manifest).map_err(ck)
+        write_json(&dir.join("manifest.json"), &manifest).map_err(|e| ck(&e))
     }
 
     /// Restore a checkpoint written by [`Learner::save`] into this learner (built with the same
@@ -296,11 +300,11 @@ impl Learner {
                 ),
             });
         }
-        let ck = |message: String| LearnerError::Checkpoint { path: dir.into(), message };
-        let state: LearnerState = read_json(&dir.join("learner.json")).map_err(ck)?;
+        let ck = |e: &dyn std::fmt::Display| LearnerError::Checkpoint { path: dir.into(), message: e.to_string() };
+        let state: LearnerState = read_json(&dir.join("learner.json")).map_err(|e| ck(&e))?;
         self.agent.load(dir)?;
         self.replay = Replay::load(&dir.join("replay.bin.zst"))?;
-        self.rng = crate::rng::load_state(&state.rng).map_err(ck)?;
+        self.rng = crate::rng::load_state(&state.rng).map_err(|e| ck(&e))?;
         self.transitions = state.transitions;
         if state.updates != self.agent.updates() {
             return Err(LearnerError::Checkpoint {
@@ -313,22 +317,20 @@ impl Learner {
 }
 
 /// Centre-cropped greedy/sampled actions of `agent` for `frames`.
-pub fn act_on(agent: &mut Agent, frames: &[&Frame], s: usize, mode: ActMode) -> Result<Vec<[f32; 5]>, LearnerError> {
-    let offs: Vec<(usize, usize)> = frames
-        .iter()
-        .map(|f| {
-            let c = center_offset(f.size(), s);
-            (c, c)
-        })
-        .collect();
-    let x = network_input(frames, &offs, s)?;
+pub fn act_on(
+    agent: &mut Agent,
+    frames: &[&StoredFrame],
+    s: usize,
+    mode: ActMode,
+) -> Result<Vec<[f32; 5]>, LearnerError> {
+    let x = centre_input(frames, s)?;
     Ok(agent.act(&x, frames.len(), mode, None)?)
 }
 
 /// Read `manifest.json` of a checkpoint directory.
 pub fn read_manifest(dir: &Path) -> Result<Manifest, LearnerError> {
     let m: Manifest = read_json(&dir.join("manifest.json"))
-        .map_err(|message| LearnerError::Checkpoint { path: dir.into(), message })?;
+        .map_err(|e| LearnerError::Checkpoint { path: dir.into(), message: e.to_string() })?;
     if m.format != CHECKPOINT_FORMAT {
         return Err(LearnerError::Checkpoint {
             path: dir.into(),
@@ -338,18 +340,39 @@ pub fn read_manifest(dir: &Path) -> Result<Manifest, LearnerError> {
     Ok(m)
 }
 
+/// A JSON file of a run or checkpoint that could not be written or read, naming the file.
+#[derive(Debug, Error)]
+pub enum JsonFileError {
+    /// Reading, writing or renaming the file failed.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The file's text is not the JSON expected (or the value cannot be serialised).
+    #[error("{}: {source}", path.display())]
+    Json {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: serde_json::Error,
+    },
+}
+
 /// Serialise `v` to `path` as pretty JSON through a temporary file.
-pub fn write_json<T: Serialize>(path: &Path, v: &T) -> Result<(), String> {
-    let text = serde_json::to_string_pretty(v).map_err(|e| e.to_string())?;
+pub fn write_json<T: Serialize>(path: &Path, v: &T) -> Result<(), JsonFileError> {
+    let text = serde_json::to_string_pretty(v).map_err(|source| JsonFileError::Json { path: path.into(), source })?;
     let tmp = path.with_extension("json.tmp");
-    std::fs::write(&tmp, text).map_err(|e| format!("{}: {e}", tmp.display()))?;
-    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+    std::fs::write(&tmp, text).map_err(|source| JsonFileError::Io { path: tmp.clone(), source })?;
+    std::fs::rename(&tmp, path).map_err(|source| JsonFileError::Io { path: path.into(), source })
 }
 
 /// Read JSON from `path`, errors naming the file.
-pub fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+pub fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, JsonFileError> {
+    let text = std::fs::read_to_string(path).map_err(|source| JsonFileError::Io { path: path.into(), source })?;
+    serde_json::from_str(&text).map_err(|source| JsonFileError::Json { path: path.into(), source })
 }
 
 fn first_difference(a: &serde_json::Value, b: &serde_json::Value, prefix: &str) -> String {

@@ -75,6 +75,11 @@ impl Adam {
         self.step
     }
 
+    /// Set the step size of the following steps.
+    pub fn set_lr(&mut self, lr: f64) {
+        self.params.lr = lr;
+    }
+
     /// One Adam step on `module` with `grads` (from `GradientsParams::from_grads`); parameters
     /// without a gradient are left unchanged.
     pub fn step<M: Module>(&mut self, module: M, grads: GradientsParams) -> M {
@@ -236,6 +241,11 @@ impl ScalarAdam {
     /// Restore saved moments.
     pub fn with_state(params: AdamParams, step: u64, m: f64, v: f64) -> Self {
         ScalarAdam { params, step, m, v }
+    }
+
+    /// Set the step size of the following steps.
+    pub fn set_lr(&mut self, lr: f64) {
+        self.params.lr = lr;
     }
 
     /// `x − Adam(grad)`.

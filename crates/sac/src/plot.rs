@@ -486,7 +486,7 @@ fn band_polygons(s: &Series, band: &[f64], lo: f64, hi: f64) -> Vec<Vec<(f64, f6
 /// tests check the pixels against).
 #[derive(Clone, Debug)]
 #[cfg_attr(not(test), allow(dead_code))]
-struct Frame {
+struct PlotArea {
     x_px: Range<i32>,
     y_px: Range<i32>,
     axes: Axes,
@@ -497,7 +497,7 @@ fn legend_label(s: &Series) -> String {
 }
 
 /// Draws the chart into `buf` (RGB, `chart.width × chart.height`).
-fn draw(chart: &Chart, series: &[Series], buf: &mut [u8]) -> Result<Frame, PlotError> {
+fn draw(chart: &Chart, series: &[Series], buf: &mut [u8]) -> Result<PlotArea, PlotError> {
     let axes = axes(chart, series);
     let (w, h) = (chart.width, chart.height);
     let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
@@ -598,7 +598,7 @@ fn draw(chart: &Chart, series: &[Series], buf: &mut [u8]) -> Result<Frame, PlotE
         }
     }
     root.present().map_err(draw_err)?;
-    Ok(Frame { x_px, y_px, axes })
+    Ok(PlotArea { x_px, y_px, axes })
 }
 
 /// Draws the chart into an RGB image (what [`write_png`] encodes).
@@ -643,7 +643,7 @@ mod tests {
     }
 
     /// Renders like [`render`], also returning where the plot landed.
-    fn render_framed(chart: &Chart, series: &[Series]) -> (RgbImage, Frame) {
+    fn render_framed(chart: &Chart, series: &[Series]) -> (RgbImage, PlotArea) {
         validate(chart, series).unwrap();
         ensure_font().unwrap();
         let mut buf = vec![0u8; chart.width as usize * chart.height as usize * 3];
@@ -653,7 +653,7 @@ mod tests {
 
     /// Pixel of data point `(x, y)` (plotters maps the range ends to the plot's first and last
     /// pixel; ±1 px of rounding).
-    fn px(f: &Frame, x: f64, y: f64) -> (u32, u32) {
+    fn px(f: &PlotArea, x: f64, y: f64) -> (u32, u32) {
         let (xr, yr) = (f.axes.x_range, f.axes.y_range);
         let fx = (x - xr.0) / (xr.1 - xr.0);
         let fy = (y - yr.0) / (yr.1 - yr.0);

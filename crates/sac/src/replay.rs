@@ -24,8 +24,8 @@ use std::sync::Arc;
 use half::f16;
 use serde::{Deserialize, Serialize};
 
-use crate::frame::Frame;
-use crate::schedule::Linear;
+use crate::frame::StoredFrame;
+use crate::schedule::LinearSchedule;
 
 /// The largest capacity accepted (2²⁴ slots); keeps a corrupted config from asking for a huge tree.
 pub const MAX_CAPACITY: usize = 1 << 24;
@@ -178,9 +178,9 @@ impl ReplayConfig {
         self.beta_start + (self.beta_end - self.beta_start) * p
     }
 
-    /// The β schedule over `steps` training steps as a [`Linear`].
-    pub fn beta_schedule(&self, steps: u64) -> Linear {
-        Linear { start: self.beta_start, end: self.beta_end, steps }
+    /// The β schedule over `steps` training steps as a [`LinearSchedule`].
+    pub fn beta_schedule(&self, steps: u64) -> LinearSchedule {
+        LinearSchedule { start: self.beta_start, end: self.beta_end, steps }
     }
 }
 
@@ -188,9 +188,9 @@ impl ReplayConfig {
 #[derive(Debug, Clone)]
 pub struct Stored {
     /// Observation at time t.
-    pub obs: Arc<Frame>,
+    pub obs: Arc<StoredFrame>,
     /// Observation at time t+1.
-    pub next_obs: Arc<Frame>,
+    pub next_obs: Arc<StoredFrame>,
     /// Normalised action in [-1, 1], order (p, dx, dy, dz, dθ) (docs/paper.md §1.2).
     pub action: [f32; 5],
     /// Reward received.
@@ -461,7 +461,7 @@ impl Replay {
         self.frame_set().values().map(|f| f.heap_bytes()).sum()
     }
 
-    fn frame_set(&self) -> HashMap<*const Frame, &Frame> {
+    fn frame_set(&self) -> HashMap<*const StoredFrame, &StoredFrame> {
         let mut set = HashMap::new();
         for t in &self.slots {
             for f in [&t.obs, &t.next_obs] {
@@ -519,8 +519,8 @@ impl Replay {
         z.write_all(&self.max_priority.to_le_bytes())?;
 
         // Frames, each once, in order of first reference.
-        let mut index: HashMap<*const Frame, u32> = HashMap::new();
-        let mut order: Vec<&Frame> = Vec::new();
+        let mut index: HashMap<*const StoredFrame, u32> = HashMap::new();
+        let mut order: Vec<&StoredFrame> = Vec::new();
         let mut refs: Vec<(u32, u32)> = Vec::with_capacity(self.slots.len());
         for t in &self.slots {
             let mut pair = [0u32; 2];
@@ -574,17 +574,19 @@ impl Replay {
         let file =
             File::open(path).map_err(|source| ReplayError::Io { path: path.to_owned(), op: "opening", source })?;
         let mut r = BufReader::with_capacity(1 << 20, file);
-        let fmt = |reason: String| ReplayError::Format { path: path.to_owned(), reason };
+        let fmt = |reason: Corrupt| ReplayError::Format { path: path.to_owned(), reason: reason.0 };
         let mut head = [0u8; 12];
         read_exact(&mut r, &mut head, "header").map_err(fmt)?;
         if &head[..8] != MAGIC {
-            return Err(fmt(format!("not a replay checkpoint (magic bytes {:02x?})", &head[..8])));
+            return Err(fmt(Corrupt(format!("not a replay checkpoint (magic bytes {:02x?})", &head[..8]))));
         }
         let version = u32::from_le_bytes([head[8], head[9], head[10], head[11]]);
         if version != VERSION {
-            return Err(fmt(format!("format version {version} is not supported (this build reads {VERSION})")));
+            return Err(fmt(Corrupt(format!(
+                "format version {version} is not supported (this build reads {VERSION})"
+            ))));
         }
-        let z = zstd::Decoder::with_buffer(r).map_err(|e| fmt(format!("starting zstd: {e}")))?;
+        let z = zstd::Decoder::with_buffer(r).map_err(|e| fmt(Corrupt(format!("starting zstd: {e}"))))?;
         read_body(z).map_err(fmt)
     }
 }
@@ -603,75 +605,86 @@ fn put_u64(w: &mut impl Write, v: u64) -> io::Result<()> {
     w.write_all(&v.to_le_bytes())
 }
 
-fn read_exact(r: &mut impl Read, buf: &mut [u8], what: &str) -> Result<(), String> {
+/// Why a replay checkpoint's body cannot be read (becomes [`ReplayError::Format`], which names the file).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+struct Corrupt(String);
+
+impl From<String> for Corrupt {
+    fn from(reason: String) -> Self {
+        Corrupt(reason)
+    }
+}
+
+fn read_exact(r: &mut impl Read, buf: &mut [u8], what: &str) -> Result<(), Corrupt> {
     r.read_exact(buf).map_err(|e| {
-        if e.kind() == io::ErrorKind::UnexpectedEof {
+        Corrupt(if e.kind() == io::ErrorKind::UnexpectedEof {
             format!("truncated while reading {what}")
         } else {
             format!("reading {what}: {e}")
-        }
+        })
     })
 }
 
-fn get<const N: usize>(r: &mut impl Read, what: &str) -> Result<[u8; N], String> {
+fn get<const N: usize>(r: &mut impl Read, what: &str) -> Result<[u8; N], Corrupt> {
     let mut b = [0u8; N];
     read_exact(r, &mut b, what)?;
     Ok(b)
 }
 
-fn get_u64(r: &mut impl Read, what: &str) -> Result<u64, String> {
+fn get_u64(r: &mut impl Read, what: &str) -> Result<u64, Corrupt> {
     get::<8>(r, what).map(u64::from_le_bytes)
 }
 
-fn get_u32(r: &mut impl Read, what: &str) -> Result<u32, String> {
+fn get_u32(r: &mut impl Read, what: &str) -> Result<u32, Corrupt> {
     get::<4>(r, what).map(u32::from_le_bytes)
 }
 
-fn get_f32(r: &mut impl Read, what: &str) -> Result<f32, String> {
+fn get_f32(r: &mut impl Read, what: &str) -> Result<f32, Corrupt> {
     get::<4>(r, what).map(f32::from_le_bytes)
 }
 
-fn get_f64(r: &mut impl Read, what: &str) -> Result<f64, String> {
+fn get_f64(r: &mut impl Read, what: &str) -> Result<f64, Corrupt> {
     get::<8>(r, what).map(f64::from_le_bytes)
 }
 
-fn get_bool(r: &mut impl Read, what: &str) -> Result<bool, String> {
+fn get_bool(r: &mut impl Read, what: &str) -> Result<bool, Corrupt> {
     match get::<1>(r, what)?[0] {
         0 => Ok(false),
         1 => Ok(true),
-        b => Err(format!("{what} is {b}, not 0 or 1")),
+        b => Err(format!("{what} is {b}, not 0 or 1").into()),
     }
 }
 
 /// Reads a count and checks it against `max` before anything is allocated for it.
-fn get_count(r: &mut impl Read, what: &str, max: u64) -> Result<usize, String> {
+fn get_count(r: &mut impl Read, what: &str, max: u64) -> Result<usize, Corrupt> {
     let n = get_u64(r, what)?;
     if n > max {
-        return Err(format!("{what} {n} exceeds its limit {max}"));
+        return Err(format!("{what} {n} exceeds its limit {max}").into());
     }
     Ok(n as usize)
 }
 
-fn read_body(mut r: impl Read) -> Result<Replay, String> {
+fn read_body(mut r: impl Read) -> Result<Replay, Corrupt> {
     let json_len = get_u32(&mut r, "config length")? as usize;
     if json_len > MAX_CONFIG_JSON {
-        return Err(format!("config length {json_len} exceeds {MAX_CONFIG_JSON}"));
+        return Err(format!("config length {json_len} exceeds {MAX_CONFIG_JSON}").into());
     }
     let mut json = vec![0u8; json_len];
     read_exact(&mut r, &mut json, "config")?;
     let cfg: ReplayConfig = serde_json::from_slice(&json).map_err(|e| format!("config JSON: {e}"))?;
-    let mut replay = Replay::new(cfg).map_err(|e| e.to_string())?;
+    let mut replay = Replay::new(cfg).map_err(|e| Corrupt(e.to_string()))?;
     let cap = replay.cfg.capacity;
 
     let len = get_count(&mut r, "transition count", cap as u64)?;
     let next = get_count(&mut r, "ring pointer", cap as u64 - 1)?;
     if len < cap && next != len {
-        return Err(format!("ring pointer {next} with {len} of {cap} slots filled"));
+        return Err(format!("ring pointer {next} with {len} of {cap} slots filled").into());
     }
     let expert_len = get_count(&mut r, "expert count", len as u64)?;
     let max_priority = get_f64(&mut r, "max priority")?;
     if !(max_priority.is_finite() && max_priority >= 1.0) {
-        return Err(format!("max priority {max_priority} is not finite and >= 1"));
+        return Err(format!("max priority {max_priority} is not finite and >= 1").into());
     }
 
     let n_frames = get_count(&mut r, "frame count", 2 * len as u64)?;
@@ -679,8 +692,8 @@ fn read_body(mut r: impl Read) -> Result<Replay, String> {
     let mut depth_bytes = Vec::new();
     for i in 0..n_frames {
         let size = get_u32(&mut r, "frame size")? as usize;
-        if size == 0 || size > Frame::MAX_SIZE {
-            return Err(format!("frame {i}: size {size} outside 1..={}", Frame::MAX_SIZE));
+        if size == 0 || size > StoredFrame::MAX_SIZE {
+            return Err(format!("frame {i}: size {size} outside 1..={}", StoredFrame::MAX_SIZE).into());
         }
         let holding = get_bool(&mut r, "frame holding flag")?;
         let mut color = vec![0u8; size * size * 3];
@@ -688,15 +701,18 @@ fn read_body(mut r: impl Read) -> Result<Replay, String> {
         depth_bytes.resize(size * size * 2, 0);
         read_exact(&mut r, &mut depth_bytes, "frame depth")?;
         let depth = depth_bytes.chunks_exact(2).map(|b| f16::from_bits(u16::from_le_bytes([b[0], b[1]]))).collect();
-        let frame = Frame::from_f16(size, color, depth, holding).map_err(|e| format!("frame {i}: {e}"))?;
+        let frame = StoredFrame::from_f16(size, color, depth, holding).map_err(|e| format!("frame {i}: {e}"))?;
         frames.push(Arc::new(frame));
     }
 
     let mut seen_expert = 0;
     for slot in 0..len {
-        let mut frame = |what| -> Result<Arc<Frame>, String> {
+        let mut frame = |what| -> Result<Arc<StoredFrame>, Corrupt> {
             let k = get_u32(&mut r, what)? as usize;
-            frames.get(k).cloned().ok_or_else(|| format!("slot {slot}: {what} index {k} >= frame count {n_frames}"))
+            frames
+                .get(k)
+                .cloned()
+                .ok_or_else(|| Corrupt(format!("slot {slot}: {what} index {k} >= frame count {n_frames}")))
         };
         let obs = frame("obs frame")?;
         let next_obs = frame("next_obs frame")?;
@@ -709,7 +725,7 @@ fn read_body(mut r: impl Read) -> Result<Replay, String> {
         let expert = get_bool(&mut r, "expert flag")?;
         let p = get_f64(&mut r, "priority")?;
         if !(p.is_finite() && p > 0.0 && p <= max_priority) {
-            return Err(format!("slot {slot}: priority {p} not in (0, max priority {max_priority}]"));
+            return Err(format!("slot {slot}: priority {p} not in (0, max priority {max_priority}]").into());
         }
         seen_expert += usize::from(expert);
         let t = Stored { obs, next_obs, action, reward, done, expert };
@@ -718,18 +734,18 @@ fn read_body(mut r: impl Read) -> Result<Replay, String> {
         replay.trees.set(slot, p.powf(replay.cfg.alpha));
     }
     if seen_expert != expert_len {
-        return Err(format!("expert count {expert_len} but {seen_expert} expert transitions"));
+        return Err(format!("expert count {expert_len} but {seen_expert} expert transitions").into());
     }
     let trailer: [u8; 8] = get(&mut r, "trailer")?;
     if &trailer != TRAILER {
-        return Err("bad trailer (corrupt body)".into());
+        return Err(Corrupt::from("bad trailer (corrupt body)".to_string()));
     }
     // Read to the end of the zstd frame so its checksum is verified and nothing follows.
     let mut extra = [0u8; 1];
     match r.read(&mut extra) {
         Ok(0) => {}
-        Ok(_) => return Err("unexpected data after the trailer".into()),
-        Err(e) => return Err(format!("checking the end of the compressed stream: {e}")),
+        Ok(_) => return Err(Corrupt::from("unexpected data after the trailer".to_string())),
+        Err(e) => return Err(format!("checking the end of the compressed stream: {e}").into()),
     }
     replay.next = next;
     replay.max_priority = max_priority;

@@ -33,17 +33,28 @@ pub fn save_state(rng: &ChaCha8Rng) -> (String, u64, String) {
     (key, rng.get_stream(), rng.get_word_pos().to_string())
 }
 
+/// A saved RNG state that [`load_state`] cannot restore.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum RngStateError {
+    /// The key is not 64 hex digits.
+    #[error("rng key `{0}` is not 64 hex digits")]
+    Key(String),
+    /// The word position is not a whole number.
+    #[error("rng word position `{0}` is not a whole number")]
+    Position(String),
+}
+
 /// Restore a state made by [`save_state`].
-pub fn load_state(state: &(String, u64, String)) -> Result<ChaCha8Rng, String> {
+pub fn load_state(state: &(String, u64, String)) -> Result<ChaCha8Rng, RngStateError> {
     let (key, stream, pos) = state;
     if key.len() != 64 || !key.is_ascii() {
-        return Err(format!("rng key `{key}` is not 64 hex digits"));
+        return Err(RngStateError::Key(key.clone()));
     }
     let mut seed = [0u8; 32];
     for (i, b) in seed.iter_mut().enumerate() {
-        *b = u8::from_str_radix(&key[2 * i..2 * i + 2], 16).map_err(|e| format!("rng key `{key}`: {e}"))?;
+        *b = u8::from_str_radix(&key[2 * i..2 * i + 2], 16).map_err(|_| RngStateError::Key(key.clone()))?;
     }
-    let pos: u128 = pos.parse().map_err(|e| format!("rng word position `{pos}`: {e}"))?;
+    let pos: u128 = pos.parse().map_err(|_| RngStateError::Position(pos.clone()))?;
     let mut r = ChaCha8Rng::from_seed(seed);
     r.set_stream(*stream);
     r.set_word_pos(pos);

@@ -27,7 +27,7 @@ use thiserror::Error;
 
 use crate::agent::ActMode;
 use crate::config::TrainConfig;
-use crate::frame::Frame;
+use crate::frame::StoredFrame;
 use crate::learner::{Learner, LearnerError, read_json, write_json};
 use crate::metrics::MetricsWriter;
 use crate::replay::Stored;
@@ -89,14 +89,14 @@ pub fn env_config(cfg: &TrainConfig) -> EnvConfig {
 }
 
 /// A simulator observation as a stored frame.
-pub fn frame_of(obs: &Observation) -> Result<Arc<Frame>, TrainError> {
+pub fn frame_of(obs: &Observation) -> Result<Arc<StoredFrame>, TrainError> {
     if obs.width != obs.height {
         return Err(TrainError::Io {
             path: PathBuf::new(),
             message: format!("frame is {}×{}, must be square", obs.width, obs.height),
         });
     }
-    Ok(Arc::new(Frame::new(obs.width, obs.color.clone(), &obs.depth, obs.holding)?))
+    Ok(Arc::new(StoredFrame::new(obs.width, obs.color.clone(), &obs.depth, obs.holding)?))
 }
 
 /// Result of one greedy evaluation.
@@ -124,7 +124,7 @@ pub fn evaluate(learner: &mut Learner, envs: &mut [Env], episodes: usize) -> Res
     let mut next = 0usize;
     while next < episodes {
         let n = envs.len().min(episodes - next);
-        let mut obs: Vec<Option<Arc<Frame>>> = Vec::with_capacity(n);
+        let mut obs: Vec<Option<Arc<StoredFrame>>> = Vec::with_capacity(n);
         for (i, env) in envs.iter_mut().take(n).enumerate() {
             let o = env.reset(episode_seed(cfg.seed ^ EVAL, 0, (next + i) as u64))?;
             obs.push(Some(frame_of(&o)?));
@@ -134,7 +134,7 @@ pub fn evaluate(learner: &mut Learner, envs: &mut [Env], episodes: usize) -> Res
         let mut ep_disc = vec![0.0f64; n];
         while obs.iter().any(|o| o.is_some()) {
             let live: Vec<usize> = (0..n).filter(|&i| obs[i].is_some()).collect();
-            let frames: Vec<&Frame> = live.iter().map(|&i| obs[i].as_deref().expect("live")).collect();
+            let frames: Vec<&StoredFrame> = live.iter().map(|&i| obs[i].as_deref().expect("live")).collect();
             let actions = learner.act(&frames, ActMode::Greedy)?;
             for (&i, a) in live.iter().zip(actions) {
                 let r = envs[i].step(&Action::from_normalized(a))?;
@@ -172,7 +172,7 @@ struct Slot {
     episode: u64,
     seed: u64,
     actions: Vec<[f32; 5]>,
-    obs: Arc<Frame>,
+    obs: Arc<StoredFrame>,
     ret: f64,
     disc: f64,
 }
@@ -311,7 +311,7 @@ pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Resu
     let sps_start = (Instant::now(), global_step);
     while learner.updates() < total && !stop() {
         // Act in every env, step, store.
-        let frames: Vec<&Frame> = slots.iter().map(|s| &*s.obs).collect();
+        let frames: Vec<&StoredFrame> = slots.iter().map(|s| &*s.obs).collect();
         let actions = learner.act(&frames, ActMode::Sample)?;
         for (slot, a) in slots.iter_mut().zip(actions) {
             let r = slot.env.step(&Action::from_normalized(a))?;
@@ -499,8 +499,8 @@ fn checkpoint(
         evals: evals.to_vec(),
         wall_time,
     };
-    let io = |e: String| TrainError::Io { path: dir.clone(), message: e };
-    write_json(&dir.join("loop.json"), &st).map_err(io)?;
+    write_json(&dir.join("loop.json"), &st)
+        .map_err(|e| TrainError::Io { path: dir.clone(), message: e.to_string() })?;
     write_latest(run_dir, learner.updates())?;
     Ok(dir)
 }

@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use equiarm_sac::frame::Frame;
+use equiarm_sac::frame::StoredFrame;
 use equiarm_sac::replay::{Replay, ReplayConfig, ReplayError, Stored};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -13,16 +13,16 @@ use rand_chacha::ChaCha8Rng;
 /// χ² critical value at 99.9 % for 7 degrees of freedom.
 const CHI2_999_DF7: f64 = 24.322;
 
-fn frame(size: usize, seed: u64) -> Arc<Frame> {
+fn frame(size: usize, seed: u64) -> Arc<StoredFrame> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     // Smooth content with a little noise, like a render: compresses, but not to nothing.
     let color = (0..size * size * 3).map(|i| ((i / 3) % size) as u8 / 4 + rng.random_range(0..3u8)).collect();
     let depth: Vec<f32> =
         (0..size * size).map(|i| 0.5 + (i / size) as f32 * 0.01 + rng.random_range(0.0..0.001)).collect();
-    Arc::new(Frame::new(size, color, &depth, seed.is_multiple_of(2)).unwrap())
+    Arc::new(StoredFrame::new(size, color, &depth, seed.is_multiple_of(2)).unwrap())
 }
 
-fn stored(obs: &Arc<Frame>, next_obs: &Arc<Frame>, reward: f32, expert: bool) -> Stored {
+fn stored(obs: &Arc<StoredFrame>, next_obs: &Arc<StoredFrame>, reward: f32, expert: bool) -> Stored {
     Stored {
         obs: obs.clone(),
         next_obs: next_obs.clone(),

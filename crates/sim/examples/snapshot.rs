@@ -32,8 +32,8 @@ struct Args {
     preset: ViewPreset,
 }
 
-fn parse_preset(s: &str) -> Result<ViewPreset, String> {
-    ViewPreset::from_name(s).ok_or_else(|| format!("unknown camera preset `{s}`"))
+fn parse_preset(s: &str) -> anyhow::Result<ViewPreset> {
+    ViewPreset::from_name(s).ok_or_else(|| anyhow::anyhow!("unknown camera preset `{s}` (side, angle15 … angle90)"))
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -69,16 +69,18 @@ impl TaskKind {
 
     /// The tasks a command-line word names: `all` is every task, any other word the one task
     /// [`TaskKind::from_name`] finds; an unknown word is an error that lists the names.
-    pub fn select(word: &str) -> Result<Vec<Self>, String> {
+    pub fn select(word: &str) -> std::result::Result<Vec<Self>, UnknownTask> {
         if word == "all" {
             return Ok(Self::ALL.to_vec());
         }
-        Self::from_name(word).map(|t| vec![t]).ok_or_else(|| {
-            let names: Vec<_> = Self::ALL.iter().map(|t| t.name()).collect();
-            format!("unknown task `{word}`: use {} or all", names.join(", "))
-        })
+        Self::from_name(word).map(|t| vec![t]).ok_or_else(|| UnknownTask(word.to_string()))
     }
 }
+
+/// A word that names no task (nor `all`); the message lists the names.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown task `{0}`: use {names} or all", names = TaskKind::ALL.map(|t| t.name()).join(", "))]
+pub struct UnknownTask(pub String);
 
 /// Gripper reset pose (docs/paper.md §3.1): TCP (0.45, 0, 0.20), yaw 0, fully open.
 pub const RESET_TCP: [f32; 3] = [0.45, 0.0, 0.20];
@@ -415,6 +417,7 @@ mod name_tests {
         assert_eq!(TaskKind::from_name("close_loop_block_pulling"), Some(TaskKind::BlockPulling));
         assert_eq!(TaskKind::select("all").unwrap(), TaskKind::ALL.to_vec());
         let e = TaskKind::select("block_pullin").unwrap_err();
+        let e = e.to_string();
         assert!(e.contains("block_pullin") && e.contains("drawer_opening") && e.contains("all"), "{e}");
     }
 }
