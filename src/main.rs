@@ -451,6 +451,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             for (p, why) in &r.truncated {
                 eprintln!("{}: read up to the last complete chunk ({why})", p.display());
             }
+            for l in &r.lost {
+                eprintln!("{}", equiarm_nodes::bag_tools::lost_text(l));
+            }
             println!("recovered {} messages into {}", r.summary.messages, r.summary.dir.display());
         }
         Command::Sim(SimCommand { sub: Some(SimSubcommand::Snapshot { task, out, seed, steps, view }), .. }) => {

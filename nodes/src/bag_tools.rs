@@ -20,7 +20,13 @@ pub fn info_text(path: &Path, info: &BagInfo) -> String {
     let _ = writeln!(s, "Bag:          {}", path.display());
     let _ = writeln!(s, "Files:        {}", info.files.len());
     for f in &info.files {
-        let state = if f.complete { "complete" } else { "TRUNCATED (run `equiarm bag recover`)" };
+        let damaged = info.lost.iter().filter(|l| l.path == f.path).count();
+        let state = match (f.complete, damaged) {
+            (true, 0) => "complete".to_string(),
+            (true, n) => format!("DAMAGED: {n} unreadable chunk(s) skipped (run `equiarm bag recover`)"),
+            (false, 0) => "TRUNCATED (run `equiarm bag recover`)".to_string(),
+            (false, n) => format!("TRUNCATED, {n} unreadable chunk(s) skipped (run `equiarm bag recover`)"),
+        };
         let comp = if f.compression.is_empty() { "none" } else { &f.compression };
         let _ = writeln!(
             s,
@@ -35,12 +41,31 @@ pub fn info_text(path: &Path, info: &BagInfo) -> String {
     let _ = writeln!(s, "Start:        {:.3} s since the epoch", secs(info.start));
     let _ = writeln!(s, "End:          {:.3} s since the epoch", secs(info.end));
     let _ = writeln!(s, "Messages:     {}", info.messages);
+    for (p, why) in &info.truncated {
+        let _ = writeln!(s, "Damage:       {} ends early ({why})", p.file_name().unwrap_or_default().to_string_lossy());
+    }
+    for l in &info.lost {
+        let _ = writeln!(s, "Damage:       {}", lost_text(l));
+    }
     let _ = writeln!(s, "Topics:");
     for (name, t) in &info.topics {
         let _ =
             writeln!(s, "  {name:<40} {:<34} {:>8} msgs {:>10.1} KiB", t.type_name, t.count, t.bytes as f64 / 1024.0);
     }
     s
+}
+
+/// One line on a chunk that could not be read: file, place, time range, messages lost, reason.
+pub fn lost_text(l: &equiarm_bag::LostChunk) -> String {
+    let at = l.offset.map(|o| format!(" at byte {o}")).unwrap_or_default();
+    let n = l.messages.map_or("an unknown number of".to_string(), |n| n.to_string());
+    format!(
+        "{}: the chunk{at} holding {:.3}–{:.3} s is damaged ({}); {n} messages lost",
+        l.path.file_name().unwrap_or_default().to_string_lossy(),
+        secs(l.start),
+        secs(l.end),
+        l.reason
+    )
 }
 
 /// Reads a bag's episodes (`EpisodeResult`s, or reconstructed from `Transition`s) and summarises them.
@@ -71,6 +96,7 @@ pub fn eval(path: &Path, gamma: f64) -> anyhow::Result<EvalReport> {
         unfinished,
         undecodable: bad,
         truncated: report.truncated.iter().map(|(p, r)| format!("{}: {r}", p.display())).collect(),
+        lost: report.lost.iter().map(lost_text).collect(),
     })
 }
 
@@ -88,6 +114,8 @@ pub struct EvalReport {
     pub undecodable: u64,
     /// Damaged files (read as far as possible).
     pub truncated: Vec<String>,
+    /// Damaged chunks skipped (their messages are not in the figures).
+    pub lost: Vec<String>,
 }
 
 impl EvalReport {
@@ -126,6 +154,9 @@ impl EvalReport {
         for t in &self.truncated {
             let _ = writeln!(s, "(damaged file read up to its last complete chunk: {t})");
         }
+        for l in &self.lost {
+            let _ = writeln!(s, "(episodes in it are not counted: {l})");
+        }
         s
     }
 
@@ -145,7 +176,7 @@ impl EvalReport {
             .collect();
         let v = serde_json::json!({
             "episodes": self.episodes, "reconstructed_from_transitions": self.reconstructed,
-            "unfinished": self.unfinished, "undecodable": self.undecodable, "truncated": self.truncated,
+            "unfinished": self.unfinished, "undecodable": self.undecodable, "truncated": self.truncated, "lost_chunks": self.lost,
             "groups": groups,
         });
         serde_json::to_string_pretty(&v).context("formatting JSON")

@@ -57,6 +57,16 @@ pub enum BagError {
         /// The MCAP reader's error.
         source: mcap::McapError,
     },
+    /// A chunk cannot be read (bad CRC, compression or records) and the read was strict.
+    #[error("{path}: a chunk{} is damaged ({reason}); `equiarm bag recover` keeps every intact chunk", offset.map(|o| format!(" at byte {o}")).unwrap_or_default())]
+    CorruptChunk {
+        /// The MCAP file.
+        path: PathBuf,
+        /// Where the chunk record starts in the file, if known.
+        offset: Option<u64>,
+        /// What is wrong with it.
+        reason: String,
+    },
     /// Writing MCAP records failed.
     #[error("{path}: writing MCAP: {source}")]
     Write {

@@ -1,9 +1,16 @@
 //! Reading bags: a rosbag2 directory (`NAME_0.mcap`, `NAME_1.mcap`, … in index order) or one `.mcap`
-//! file. Complete files are read through their summary; a file without its footer (a killed
-//! recorder) is read record by record up to its last complete chunk.
+//! file. Complete files are read chunk by chunk through their summary's chunk index; a file without
+//! its footer (a killed recorder), or whose summary cannot be read, record by record up to its last
+//! complete record.
+//!
+//! A chunk that does not decode (a CRC mismatch, bad compression, a bad record inside) is skipped
+//! whole and reported in [`ReadReport::lost`] with its time range and, where the file's message
+//! index tells, its message count; every other chunk is still delivered. Only a damaged record
+//! *frame* (a length that points nowhere) in a file read record by record ends that file's read.
 
-use std::borrow::Cow;
 use std::collections::BTreeMap;
+
+use mcap::records::{self, Record};
 use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -47,6 +54,27 @@ pub struct ReadReport {
     pub messages: u64,
     /// Files whose end was missing or damaged, with what was wrong (salvage mode only).
     pub truncated: Vec<(PathBuf, String)>,
+    /// Chunks skipped because they do not decode (salvage mode only).
+    pub lost: Vec<LostChunk>,
+    /// Messages delivered per file, in read order.
+    pub per_file: Vec<u64>,
+}
+
+/// A chunk whose messages could not be read.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LostChunk {
+    /// The file.
+    pub path: PathBuf,
+    /// Where the chunk record starts in the file (known when the file's chunk index was read).
+    pub offset: Option<u64>,
+    /// Log time of its first message, as its header or index says (ns since the epoch).
+    pub start: Nanos,
+    /// Log time of its last message.
+    pub end: Nanos,
+    /// Its message count, from the file's message index (None without one).
+    pub messages: Option<u64>,
+    /// What is wrong with it.
+    pub reason: String,
 }
 
 /// Message counts and times of one topic.
@@ -69,7 +97,7 @@ pub struct FileInfo {
     pub path: PathBuf,
     /// Size on disk, bytes.
     pub size: u64,
-    /// Messages read from it.
+    /// Messages read from it (damaged chunks not counted).
     pub messages: u64,
     /// Whether it ends with a valid footer (a file from a killed recorder does not).
     pub complete: bool,
@@ -90,6 +118,10 @@ pub struct BagInfo {
     pub end: Nanos,
     /// All messages.
     pub messages: u64,
+    /// Files that end early or damaged, with what was wrong.
+    pub truncated: Vec<(PathBuf, String)>,
+    /// Chunks that do not decode: their messages are not counted above.
+    pub lost: Vec<LostChunk>,
 }
 
 /// A bag opened for reading.
@@ -151,7 +183,9 @@ impl Reader {
         self.files.iter().map(|(p, _)| p.as_path()).collect()
     }
 
-    /// Calls `f` with every message, file by file, in file order.
+    /// Calls `f` with every message, file by file, in file order. In [`ReadMode::Strict`] a
+    /// truncated file or a damaged chunk is an error (after the messages before it were delivered);
+    /// in [`ReadMode::Salvage`] they are reported in the [`ReadReport`] and reading goes on.
     pub fn for_each<E>(
         &self,
         mode: ReadMode,
@@ -160,68 +194,16 @@ impl Reader {
         let mut report = ReadReport::default();
         for (path, map) in &self.files {
             let complete = map.len() >= 2 * MAGIC.len() && map.ends_with(MAGIC) && mcap::read::footer(map).is_ok();
-            let options = if complete {
-                mcap::read::Options::ValidateChunkCrcs.into()
-            } else {
-                mcap::read::Options::IgnoreEndMagic.into()
+            let summary = if complete { mcap::Summary::read(map).ok().flatten() } else { None };
+            let before = report.messages;
+            let read = match summary.filter(|s| !s.chunk_indexes.is_empty()) {
+                Some(s) => read_indexed(path, map, &s, mode, &mut report, &mut f)?,
+                None => read_linear(path, map, complete, mode, &mut report, &mut f)?,
             };
-            let stream = mcap::MessageStream::new_with_options(map, options).map_err(|source| BagError::Mcap {
-                path: path.clone(),
-                messages: 0,
-                source,
-            })?;
-            let mut in_file = 0u64;
-            for m in stream {
-                let m = match m {
-                    Ok(m) => m,
-                    Err(source) => {
-                        let reason = source.to_string();
-                        if complete {
-                            return Err(BagError::Mcap { path: path.clone(), messages: in_file, source });
-                        }
-                        match mode {
-                            ReadMode::Strict => {
-                                return Err(BagError::Truncated { path: path.clone(), messages: in_file, reason });
-                            }
-                            ReadMode::Salvage => {
-                                report.truncated.push((path.clone(), reason));
-                                break;
-                            }
-                        }
-                    }
-                };
-                let type_name = m.channel.schema.as_ref().map(|s| s.name.as_str()).unwrap_or("");
-                let rm = RecordedMessage {
-                    topic: &m.channel.topic,
-                    type_name,
-                    channel: &m.channel,
-                    log_time: m.log_time,
-                    publish_time: m.publish_time,
-                    sequence: m.sequence,
-                    data: match &m.data {
-                        Cow::Borrowed(b) => b,
-                        Cow::Owned(v) => v.as_slice(),
-                    },
-                };
-                if let Err(e) = f(&rm) {
-                    return Ok(Err(e));
-                }
-                in_file += 1;
-                report.messages += 1;
+            if let Err(e) = read {
+                return Ok(Err(e));
             }
-            if !complete && !report.truncated.iter().any(|(p, _)| p == path) {
-                // the stream ended cleanly at a data end record but the footer is missing
-                match mode {
-                    ReadMode::Strict => {
-                        return Err(BagError::Truncated {
-                            path: path.clone(),
-                            messages: in_file,
-                            reason: "no footer or end magic".into(),
-                        });
-                    }
-                    ReadMode::Salvage => report.truncated.push((path.clone(), "no footer or end magic".into())),
-                }
-            }
+            report.per_file.push(report.messages - before);
         }
         Ok(Ok(report))
     }
@@ -230,42 +212,231 @@ impl Reader {
     /// so a killed bag is described as far as it goes).
     pub fn info(&self) -> Result<BagInfo, BagError> {
         let mut info = BagInfo::default();
-        self.for_each(ReadMode::Salvage, |m| {
-            let t = info.topics.entry(m.topic.to_string()).or_default();
-            if t.count == 0 {
-                t.type_name = m.type_name.to_string();
-                t.offered_qos = m.channel.metadata.get("offered_qos_profiles").cloned().unwrap_or_default();
-            }
-            t.count += 1;
-            t.bytes += m.data.len() as u64;
-            if info.messages == 0 || m.log_time < info.start {
-                info.start = m.log_time;
-            }
-            info.end = info.end.max(m.log_time);
-            info.messages += 1;
-            Ok::<(), std::convert::Infallible>(())
-        })?
-        .unwrap_or_else(|e| match e {});
-        for (path, map) in &self.files {
-            let complete = map.ends_with(MAGIC) && mcap::read::footer(map).is_ok();
-            let (mut messages, mut compression) = (0, String::new());
-            if complete {
-                if let Ok(Some(s)) = mcap::Summary::read(map) {
-                    messages = s.stats.as_ref().map(|st| st.message_count).unwrap_or(0);
-                    compression = s.chunk_indexes.first().map(|c| c.compression.clone()).unwrap_or_default();
+        let report = self
+            .for_each(ReadMode::Salvage, |m| {
+                let t = info.topics.entry(m.topic.to_string()).or_default();
+                if t.count == 0 {
+                    t.type_name = m.type_name.to_string();
+                    t.offered_qos = m.channel.metadata.get("offered_qos_profiles").cloned().unwrap_or_default();
                 }
-            } else {
-                messages = count_salvageable(map);
-            }
+                t.count += 1;
+                t.bytes += m.data.len() as u64;
+                if info.messages == 0 || m.log_time < info.start {
+                    info.start = m.log_time;
+                }
+                info.end = info.end.max(m.log_time);
+                info.messages += 1;
+                Ok::<(), std::convert::Infallible>(())
+            })?
+            .unwrap_or_else(|e| match e {});
+        for ((path, map), messages) in self.files.iter().zip(report.per_file) {
+            let complete = map.ends_with(MAGIC) && mcap::read::footer(map).is_ok();
+            let compression = first_compression(map);
             info.files.push(FileInfo { path: path.clone(), size: map.len() as u64, messages, complete, compression });
         }
+        (info.truncated, info.lost) = (report.truncated, report.lost);
         Ok(info)
     }
 }
 
-fn count_salvageable(map: &[u8]) -> u64 {
-    let Ok(stream) = mcap::MessageStream::new_with_options(map, mcap::read::Options::IgnoreEndMagic.into()) else {
-        return 0;
+/// The message records of the chunk record at `offset..offset + len` of `map`, decoded and
+/// CRC-checked whole: an error anywhere loses the chunk, never a part of it.
+fn chunk_at(map: &[u8], offset: u64, len: u64) -> Result<Vec<Record<'static>>, String> {
+    let start = usize::try_from(offset).map_err(|_| "offset beyond memory".to_string())?;
+    let end = usize::try_from(len)
+        .ok()
+        .and_then(|l| start.checked_add(l))
+        .filter(|&e| e <= map.len() && e >= start + 9)
+        .ok_or_else(|| format!("the index points outside the file ({} bytes)", map.len()))?;
+    if map[start] != records::op::CHUNK {
+        return Err(format!("no chunk record at byte {start} (opcode {:#04x})", map[start]));
+    }
+    match mcap::read::parse_record(records::op::CHUNK, &map[start + 9..end]).map_err(|e| e.to_string())? {
+        Record::Chunk { header, data } => chunk_records(header, &data),
+        _ => Err("not a chunk record".into()),
+    }
+}
+
+/// Every record of a chunk (decompressed, its CRC checked at the end), owned.
+fn chunk_records(header: records::ChunkHeader, data: &[u8]) -> Result<Vec<Record<'static>>, String> {
+    let reader = mcap::read::ChunkReader::new(header, data).map_err(|e| e.to_string())?;
+    reader.map(|r| r.map(Record::into_owned).map_err(|e| e.to_string())).collect()
+}
+
+/// Hands one decoded message record to `f`; `channel` is its channel.
+fn deliver<E>(
+    channel: &Arc<mcap::Channel<'static>>,
+    header: &records::MessageHeader,
+    data: &[u8],
+    f: &mut impl FnMut(&RecordedMessage<'_>) -> Result<(), E>,
+) -> Result<(), E> {
+    let type_name = channel.schema.as_ref().map(|s| s.name.as_str()).unwrap_or("");
+    f(&RecordedMessage {
+        topic: &channel.topic,
+        type_name,
+        channel,
+        log_time: header.log_time,
+        publish_time: header.publish_time,
+        sequence: header.sequence,
+        data,
+    })
+}
+
+/// A complete file, chunk by chunk through its summary's chunk index (channels from the summary).
+fn read_indexed<E>(
+    path: &Path,
+    map: &[u8],
+    summary: &mcap::Summary,
+    mode: ReadMode,
+    report: &mut ReadReport,
+    f: &mut impl FnMut(&RecordedMessage<'_>) -> Result<(), E>,
+) -> Result<Result<(), E>, BagError> {
+    let mut chunks: Vec<&records::ChunkIndex> = summary.chunk_indexes.iter().collect();
+    chunks.sort_by_key(|c| c.chunk_start_offset);
+    for idx in chunks {
+        let decoded = chunk_at(map, idx.chunk_start_offset, idx.chunk_length).and_then(|recs| {
+            // every message's channel must be known before any is delivered
+            let mut out = Vec::new();
+            for r in recs {
+                if let Record::Message { header, data } = r {
+                    let ch = summary.channels.get(&header.channel_id).ok_or_else(|| {
+                        format!("message {} refers to unknown channel {}", header.sequence, header.channel_id)
+                    })?;
+                    out.push((ch, header, data));
+                }
+            }
+            Ok(out)
+        });
+        match decoded {
+            Ok(messages) => {
+                for (ch, header, data) in messages {
+                    if let Err(e) = deliver(ch, &header, &data, f) {
+                        return Ok(Err(e));
+                    }
+                    report.messages += 1;
+                }
+            }
+            Err(reason) => {
+                if mode == ReadMode::Strict {
+                    return Err(BagError::CorruptChunk {
+                        path: path.into(),
+                        offset: Some(idx.chunk_start_offset),
+                        reason,
+                    });
+                }
+                let messages =
+                    summary.read_message_indexes(map, idx).ok().map(|ix| ix.values().map(|v| v.len() as u64).sum());
+                report.lost.push(LostChunk {
+                    path: path.into(),
+                    offset: Some(idx.chunk_start_offset),
+                    start: idx.message_start_time,
+                    end: idx.message_end_time,
+                    messages,
+                    reason,
+                });
+            }
+        }
+    }
+    Ok(Ok(()))
+}
+
+/// A file read record by record (no footer, or a summary that cannot be read): damaged chunks are
+/// skipped; a damaged record frame ends the file.
+fn read_linear<E>(
+    path: &Path,
+    map: &[u8],
+    complete: bool,
+    mode: ReadMode,
+    report: &mut ReadReport,
+    f: &mut impl FnMut(&RecordedMessage<'_>) -> Result<(), E>,
+) -> Result<Result<(), E>, BagError> {
+    let reader = mcap::read::LinearReader::new_with_options(map, mcap::read::Options::IgnoreEndMagic.into())
+        .map_err(|source| BagError::Mcap { path: path.into(), messages: 0, source })?;
+    let mut channels = mcap::read::ChannelAccumulator::<'static>::default();
+    let (mut in_file, mut ended) = (0u64, None::<String>);
+    'records: for r in reader {
+        let r = match r {
+            Ok(r) => r,
+            Err(e) => {
+                ended = Some(e.to_string());
+                break;
+            }
+        };
+        let inner: Vec<Record<'static>> = match r {
+            Record::Chunk { header, data } => {
+                let (start, end) = (header.message_start_time, header.message_end_time);
+                match chunk_records(header, &data) {
+                    Ok(recs) => recs,
+                    Err(reason) => {
+                        if mode == ReadMode::Strict {
+                            return Err(BagError::CorruptChunk { path: path.into(), offset: None, reason });
+                        }
+                        report.lost.push(LostChunk {
+                            path: path.into(),
+                            offset: None,
+                            start,
+                            end,
+                            messages: None,
+                            reason,
+                        });
+                        continue;
+                    }
+                }
+            }
+            Record::DataEnd(_) => break,
+            other => vec![other.into_owned()],
+        };
+        for r in inner {
+            let step = match r {
+                Record::Schema { header, data } => channels.add_schema(header, data).map(|_| None),
+                Record::Channel(c) => channels.add_channel(c).map(|_| None),
+                Record::Message { header, data } => match channels.get(header.channel_id) {
+                    Some(ch) => Ok(Some((ch, header, data))),
+                    None => Err(mcap::McapError::UnknownChannel(header.sequence, header.channel_id)),
+                },
+                _ => Ok(None),
+            };
+            match step {
+                Ok(Some((ch, header, data))) => {
+                    if let Err(e) = deliver(&ch, &header, &data, f) {
+                        return Ok(Err(e));
+                    }
+                    in_file += 1;
+                    report.messages += 1;
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    ended = Some(e.to_string());
+                    break 'records;
+                }
+            }
+        }
+    }
+    let reason = match ended {
+        Some(reason) => reason,
+        None if complete => return Ok(Ok(())),
+        None => "no footer or end magic".into(),
     };
-    stream.take_while(|m| m.is_ok()).count() as u64
+    match mode {
+        ReadMode::Strict => Err(BagError::Truncated { path: path.into(), messages: in_file, reason }),
+        ReadMode::Salvage => {
+            report.truncated.push((path.into(), reason));
+            Ok(Ok(()))
+        }
+    }
+}
+
+/// The compression of a file's first chunk (`""` when it has none or it cannot be read).
+fn first_compression(map: &[u8]) -> String {
+    let Ok(mut records) = mcap::read::LinearReader::new_with_options(map, mcap::read::Options::IgnoreEndMagic.into())
+    else {
+        return String::new();
+    };
+    records
+        .find_map(|r| match r {
+            Ok(Record::Chunk { header, .. }) => Some(header.compression),
+            Ok(Record::DataEnd(_)) | Err(_) => Some(String::new()),
+            Ok(_) => None,
+        })
+        .unwrap_or_default()
 }

@@ -1,6 +1,6 @@
 //! Rewrites a bag whose recorder was killed (files without summary, footer or `metadata.yaml`) as a
-//! complete, indexed bag: every message of every complete chunk, with its original topics, schemas,
-//! QoS metadata and times.
+//! complete, indexed bag: every message of every intact chunk, with its original topics, schemas,
+//! QoS metadata and times. Damaged chunks are skipped and reported, the chunks after them kept.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -14,6 +14,8 @@ pub struct RecoverReport {
     pub summary: BagSummary,
     /// Input files that ended early, with the reason reading stopped there.
     pub truncated: Vec<(PathBuf, String)>,
+    /// Damaged chunks skipped, with their time ranges and (where indexed) message counts.
+    pub lost: Vec<crate::LostChunk>,
 }
 
 /// Reads everything readable from `input` (a bag directory or an `.mcap` file) and writes it to the
@@ -45,5 +47,5 @@ pub fn recover(input: &Path, output: &Path, opts: WriterOptions) -> Result<Recov
         writer.write(id, m.log_time, m.publish_time, m.data)
     })??;
     let summary = writer.finish()?;
-    Ok(RecoverReport { summary, truncated: report.truncated })
+    Ok(RecoverReport { summary, truncated: report.truncated, lost: report.lost })
 }
