@@ -130,6 +130,52 @@ fn sigint_leaves_a_complete_bag_with_every_message_after_the_match() {
     assert_eq!(v["episodes"], 6, "{v}");
 }
 
+/// Regression (issue 28): in a main job the sims' writers lost the recorder and the bag silently
+/// stopped holding their topics. The recorder now says when a recorded topic has no publisher left.
+#[test]
+fn the_recorder_says_when_a_topic_loses_its_last_publisher() {
+    let dir = support::scratch("recorder_lost");
+    let mut rec = record(93, &dir.join("lost"), &["--all"]);
+    let stderr = rec.stderr.take().unwrap();
+    let (tx, lines) = std::sync::mpsc::channel::<String>();
+    std::thread::spawn(move || {
+        for line in std::io::BufRead::lines(std::io::BufReader::new(stderr)).map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    rt.block_on(async {
+        let mut node = RosNode::new("/", "lost_pub", &RosOptions { domain_id: 93, localhost_only: false }).unwrap();
+        let cmds = node.publisher::<GripperCommand>("/lost/gripper_cmd", qos::command()).unwrap();
+        assert!(node.wait_for_subscription(&cmds, Duration::from_secs(15)).await, "recorder never subscribed");
+        for k in 0..5 {
+            cmds.publish(cmd(k)).await.unwrap();
+        }
+        tokio::time::sleep(Duration::from_secs(2)).await;
+        // the publisher ends with its node
+    });
+    drop(rt);
+    let wanted = "/lost/gripper_cmd: every publisher is gone";
+    let start = Instant::now();
+    let mut seen = Vec::new();
+    while start.elapsed() < Duration::from_secs(60) && !seen.iter().any(|l: &String| l.contains(wanted)) {
+        if let Ok(l) = lines.recv_timeout(Duration::from_millis(200)) {
+            seen.push(l);
+        }
+    }
+    Command::new("kill").args(["-INT", &rec.id().to_string()]).status().unwrap();
+    let status = wait_exit(&mut rec, 15);
+    assert!(status.success(), "recorder exit: {status}");
+    while let Ok(l) = lines.recv_timeout(Duration::from_secs(2)) {
+        seen.push(l);
+    }
+    let log = seen.join("\n");
+    assert!(log.contains(wanted), "{log}");
+    assert!(log.contains("had no publisher left when recording stopped: /lost/gripper_cmd"), "{log}");
+}
+
 #[test]
 fn sigkill_loses_at_most_half_a_second_and_recover_makes_a_readable_bag() {
     let dir = support::scratch("recorder_kill");
@@ -203,6 +249,33 @@ fn sigkill_loses_at_most_half_a_second_and_recover_makes_a_readable_bag() {
         serde_json::json!({"/rec/gripper_cmd": seqs.len(), "/rec/image": images}),
         serde_json::json!({"/rec/gripper_cmd": GripperCommand::TYPE_NAME, "/rec/image": Image::TYPE_NAME}),
     );
+}
+
+/// Regression (issue 28): `bag play` ignored SIGINT/SIGTERM while it waited for the next recorded
+/// timestamp, so a bag with a far-future log time could only be killed.
+#[test]
+fn bag_play_stops_on_sigint_while_waiting_for_a_far_timestamp() {
+    use equiarm_bag::qos::OfferedQos;
+    use equiarm_bag::{TopicInfo, Writer, WriterOptions};
+    let dir = support::scratch("recorder_play_wait");
+    let bag = dir.join("far");
+    let mut w = Writer::create(&bag, WriterOptions::default()).unwrap();
+    let c = w.add_topic(TopicInfo::of::<GripperCommand>("/far/gripper_cmd", &[OfferedQos::reliable(10)])).unwrap();
+    let t0 = 1_700_000_000_000_000_000u64;
+    // the second message is recorded 100 days after the first
+    for (k, t) in [(0u64, t0), (1, t0 + 100 * 86_400 * 1_000_000_000)] {
+        w.write(c, t, t, &cdr::encode(&cmd(k)).unwrap()).unwrap();
+    }
+    w.finish().unwrap();
+    let mut player = play(92, &bag, &["--wait-ms", "500"]);
+    std::thread::sleep(Duration::from_secs(3));
+    std::process::Command::new("kill").args(["-INT", &player.id().to_string()]).status().unwrap();
+    // the next message is due in 100 days: exiting at all means the wait woke on the signal
+    let status = wait_exit(&mut player, 10);
+    assert!(status.success(), "player exit: {status}");
+    let mut out = String::new();
+    std::io::Read::read_to_string(&mut player.stdout.take().unwrap(), &mut out).unwrap();
+    assert!(out.contains("published 1 messages (0 skipped)"), "{out}");
 }
 
 #[test]

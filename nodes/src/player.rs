@@ -121,14 +121,32 @@ pub async fn run(opts: &RosOptions, cfg: PlayConfig) -> anyhow::Result<(u64, u64
             }
         }
     }
+    // Every wait below also wakes on SIGINT/SIGTERM: a bag whose next timestamp lies hours ahead (or
+    // a lock-step peer that never answers) must not make the player unkillable.
+    let signal = shutdown_signal();
+    tokio::pin!(signal);
+    macro_rules! or_stop {
+        ($wait:expr) => {
+            tokio::select! {
+                s = &mut signal => { info!("{} received, stopping playback", s?); None }
+                v = $wait => Some(v),
+            }
+        };
+    }
     // Lock-step needs someone to answer: wait (up to 30 s) for a publisher on each gripper_cmd topic
     // (a loaded machine can take seconds to discover it), then the usual match delay.
     for (topic, sub) in &answers {
-        if !node.wait_for_publisher(sub, Duration::from_secs(30)).await {
-            warn!("lock-step: nothing publishes the gripper commands answering {topic} yet; playing anyway");
+        match or_stop!(node.wait_for_publisher(sub, Duration::from_secs(30))) {
+            None => return Ok((0, 0)),
+            Some(false) => {
+                warn!("lock-step: nothing publishes the gripper commands answering {topic} yet; playing anyway")
+            }
+            Some(true) => {}
         }
     }
-    tokio::time::sleep(cfg.wait_for_match).await;
+    if or_stop!(tokio::time::sleep(cfg.wait_for_match)).is_none() {
+        return Ok((0, 0));
+    }
 
     // Read the bag in a blocking task and hand messages over a bounded channel (back-pressure keeps
     // memory flat for big bags).
@@ -141,15 +159,13 @@ pub async fn run(opts: &RosOptions, cfg: PlayConfig) -> anyhow::Result<(u64, u64
             .ok();
         Ok::<(), anyhow::Error>(())
     });
-    let signal = shutdown_signal();
-    tokio::pin!(signal);
-    let (mut published, mut skipped) = (0u64, 0u64);
+    let (mut published, mut skipped, mut interrupted) = (0u64, 0u64, false);
     let start = Instant::now();
     let t0 = info.start;
     loop {
-        let next = tokio::select! {
-            s = &mut signal => { info!("{} received, stopping playback", s?); break; }
-            m = rx.recv() => m,
+        let Some(next) = or_stop!(rx.recv()) else {
+            interrupted = true;
+            break;
         };
         let Some((topic, log_time, data)) = next else { break };
         let Some(p) = publishers.get(&topic) else {
@@ -159,12 +175,20 @@ pub async fn run(opts: &RosOptions, cfg: PlayConfig) -> anyhow::Result<(u64, u64
         if let (Some(every), Some(sub)) = (cfg.lockstep, answers.get(&topic)) {
             let seq = cdr::decode::<Observation>(&data)?.seq;
             let mut answered = false;
+            let mut stopped = false;
             for _ in 0..10 {
                 p.publish_cdr(&data).await?;
-                if wait_for_answer(sub, seq, every).await? {
-                    answered = true;
+                match or_stop!(wait_for_answer(sub, seq, every)) {
+                    None => stopped = true,
+                    Some(got) => answered = got?,
+                }
+                if answered || stopped {
                     break;
                 }
+            }
+            if stopped {
+                interrupted = true;
+                break;
             }
             if answered {
                 published += 1;
@@ -176,8 +200,11 @@ pub async fn run(opts: &RosOptions, cfg: PlayConfig) -> anyhow::Result<(u64, u64
         }
         if cfg.rate > 0.0 {
             let due = Duration::from_secs_f64(log_time.saturating_sub(t0) as f64 / 1e9 / cfg.rate);
-            if let Some(wait) = due.checked_sub(start.elapsed()) {
-                tokio::time::sleep(wait).await;
+            if let Some(wait) = due.checked_sub(start.elapsed())
+                && or_stop!(tokio::time::sleep(wait)).is_none()
+            {
+                interrupted = true;
+                break;
             }
         }
         match p.publish_cdr(&data).await {
@@ -189,7 +216,11 @@ pub async fn run(opts: &RosOptions, cfg: PlayConfig) -> anyhow::Result<(u64, u64
         }
     }
     drop(rx);
-    reading.await??;
+    // Stopped early, the reader fails at its next send to the closed channel: not an error then.
+    let read = reading.await?;
+    if !interrupted {
+        read?;
+    }
     // give reliable subscribers a moment to receive the tail before the node goes away
     tokio::time::sleep(Duration::from_millis(300)).await;
     drop(publishers);

@@ -4,6 +4,11 @@
 //! the bag, flushes it on a timer (so a kill loses at most the flush interval) and prints a one-line
 //! status.
 //!
+//! Every second it counts each recorded topic's publishers, and says when a topic that had some has
+//! none left (a publisher ended, or DDS lost it: a stalled machine can let a participant's lease
+//! expire) and when one is back, and lists at the end the topics that lost theirs, so a bag with a
+//! gap does not pass for a complete one.
+//!
 //! ## Limitations
 //! Only the types equiarm knows (`equiarm msg list`) can be recorded: ros2-client offers no
 //! raw-bytes subscription. With `--all`, topics are found by discovery (polled every 100 ms by default).
@@ -11,6 +16,7 @@
 use std::collections::HashSet;
 use std::io::Write as _;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::{Context as _, bail};
@@ -64,8 +70,37 @@ fn qos_for(type_name: &str) -> (ros2_client::qos::QosProfile, OfferedQos) {
     }
 }
 
+/// A recorded topic's publisher count, as discovery sees it.
+struct Watch {
+    name: String,
+    count: Box<dyn Fn(&RosNode) -> usize + Send>,
+    /// Publishers were seen at some point.
+    had: bool,
+    /// None are left now (and a warning said so).
+    lost: bool,
+}
+
+impl Watch {
+    /// Compares the publisher count with the last one and logs a loss or a return.
+    fn check(&mut self, node: &RosNode) {
+        let n = (self.count)(node);
+        if n > 0 {
+            if self.lost {
+                info!("{}: a publisher is back ({n} now); recording it again", self.name);
+            }
+            (self.had, self.lost) = (true, false);
+        } else if self.had && !self.lost {
+            self.lost = true;
+            warn!(
+                "{}: every publisher is gone (it ended, or DDS lost it); the bag has nothing of this topic until one is back",
+                self.name
+            );
+        }
+    }
+}
+
 async fn forward<M: RosMessage>(
-    sub: crate::ros::Subscriber<M>,
+    sub: Arc<crate::ros::Subscriber<M>>,
     topic: TopicId,
     tx: mpsc::Sender<Sample>,
 ) -> anyhow::Result<()> {
@@ -88,11 +123,19 @@ fn subscribe(
     type_name: &str,
     tx: &mpsc::Sender<Sample>,
     tasks: &mut Vec<tokio::task::JoinHandle<()>>,
+    watches: &mut Vec<Watch>,
 ) -> anyhow::Result<()> {
     let (profile, offered) = qos_for(type_name);
     crate::with_message_type!(type_name, M => {
         let topic = writer.add_topic(TopicInfo::of::<M>(name, &[offered]))?;
-        let sub = node.subscription::<M>(name, profile)?;
+        let sub = Arc::new(node.subscription::<M>(name, profile)?);
+        let counted = sub.clone();
+        watches.push(Watch {
+            name: name.to_string(),
+            count: Box::new(move |node| counted.publisher_count(node)),
+            had: false,
+            lost: false,
+        });
         let tx = tx.clone();
         let task_name = name.to_string();
         tasks.push(tokio::spawn(async move {
@@ -138,9 +181,9 @@ pub async fn run(opts: &RosOptions, cfg: RecordConfig) -> anyhow::Result<equiarm
     let mut node = RosNode::new("/", "equiarm_recorder", opts)?;
     let (tx, mut rx) = mpsc::channel::<Sample>(4096);
     let mut recording: HashSet<String> = HashSet::new();
-    let mut tasks = Vec::new();
+    let (mut tasks, mut watches) = (Vec::new(), Vec::new());
     for (name, type_name) in &cfg.topics {
-        subscribe(&mut node, &mut writer, name, type_name, &tx, &mut tasks)?;
+        subscribe(&mut node, &mut writer, name, type_name, &tx, &mut tasks, &mut watches)?;
         recording.insert(name.clone());
     }
     let signal = shutdown_signal();
@@ -149,6 +192,7 @@ pub async fn run(opts: &RosOptions, cfg: RecordConfig) -> anyhow::Result<equiarm
     let mut tick = tokio::time::interval(Duration::from_millis(50));
     let mut last_status = Instant::now();
     let mut last_discovery = Instant::now() - Duration::from_secs(10);
+    let mut last_watch = Instant::now();
     let (mut messages, mut bytes, mut since, mut since_count) = (0u64, 0u64, Instant::now(), 0u64);
     loop {
         tokio::select! {
@@ -172,8 +216,14 @@ pub async fn run(opts: &RosOptions, cfg: RecordConfig) -> anyhow::Result<equiarm
                     for t in node.discovered_topics() {
                         if let Some((name, type_name)) = ros_topic(&t.name, &t.type_name)
                             && recording.insert(name.clone()) {
-                                subscribe(&mut node, &mut writer, &name, type_name, &tx, &mut tasks)?;
+                                subscribe(&mut node, &mut writer, &name, type_name, &tx, &mut tasks, &mut watches)?;
                             }
+                    }
+                }
+                if last_watch.elapsed() >= Duration::from_secs(1) {
+                    last_watch = Instant::now();
+                    for w in &mut watches {
+                        w.check(&node);
                     }
                 }
                 if let Some(every) = cfg.status_every
@@ -188,6 +238,11 @@ pub async fn run(opts: &RosOptions, cfg: RecordConfig) -> anyhow::Result<equiarm
         }
     }
     drop(tx);
+    let lost: Vec<&str> = watches.iter().filter(|w| w.lost).map(|w| w.name.as_str()).collect();
+    if !lost.is_empty() {
+        warn!("these topics had no publisher left when recording stopped: {}", lost.join(", "));
+    }
+    drop(watches);
     // stop the subscriptions before the node goes (RustDDS complains about readers outliving it)
     for t in &tasks {
         t.abort();
