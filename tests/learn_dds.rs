@@ -352,8 +352,18 @@ fn the_trainer_stores_each_frame_once_keeps_only_successful_demos_and_never_the_
     let mut bad = transition("env5", 0, 0, false, false);
     bad.obs.depth.encoding = "16UC1".into();
     assert!(ing.transition(&bad).unwrap_err().to_string().contains("16UC1"));
+    // Regression (issue 28): a NaN or huge reward or a NaN action made the DDS trainer exit without a
+    // checkpoint; now the transition is refused, naming the value, and counted.
+    for (reward, dx, what) in
+        [(f32::NAN, 0.0, "reward NaN"), (1e30, 0.0, "within ±1000"), (0.0, f32::NAN, "action dx is NaN")]
+    {
+        let mut t = transition("env6", 0, 0, false, false);
+        (t.reward, t.action.dx) = (reward, dx);
+        let e = ing.transition(&t).unwrap_err().to_string();
+        assert!(e.contains(what), "{e}");
+    }
     let n = &ing.counts;
-    assert_eq!((n.transitions, n.stored, n.expert_held, n.expert_dropped, n.eval, n.bad), (11, 7, 0, 2, 1, 1));
+    assert_eq!((n.transitions, n.stored, n.expert_held, n.expert_dropped, n.eval, n.bad), (14, 7, 0, 2, 1, 4));
 }
 
 #[test]

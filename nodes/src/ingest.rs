@@ -36,6 +36,53 @@ pub struct Received {
 
 type Key = (String, u32);
 
+/// Largest reward magnitude accepted from a peer: every task gives 0 or 1 (docs/paper.md §3.2), so a
+/// larger one is a bug or an attack, and one such row would dominate the critic's loss.
+pub const MAX_ABS_REWARD: f32 = 1000.0;
+
+/// Why a Transition is refused (counted in [`Received::bad`], never stored).
+#[derive(Debug, thiserror::Error)]
+pub enum BadTransition {
+    /// Its obs or next_obs makes no frame of the run's size.
+    #[error(transparent)]
+    Frame(#[from] BadFrame),
+    /// Its reward is NaN, infinite or beyond ±[`MAX_ABS_REWARD`].
+    #[error("reward {0} is not finite and within ±{MAX_ABS_REWARD}")]
+    Reward(f32),
+    /// An action component is NaN or infinite.
+    #[error("action {field} is {value}")]
+    Action {
+        /// The GripperCommand field.
+        field: &'static str,
+        /// Its value.
+        value: f32,
+    },
+}
+
+impl BadTransition {
+    /// The kind of defect, for logging each kind once per sender.
+    pub fn cause(&self) -> &'static str {
+        match self {
+            BadTransition::Frame(_) => "frame",
+            BadTransition::Reward(_) => "reward",
+            BadTransition::Action { .. } => "action",
+        }
+    }
+}
+
+/// A Transition's reward and action as the replay accepts them.
+fn check_values(t: &Transition) -> Result<(), BadTransition> {
+    if !(t.reward.is_finite() && t.reward.abs() <= MAX_ABS_REWARD) {
+        return Err(BadTransition::Reward(t.reward));
+    }
+    let a = &t.action;
+    let fields = [("open_ratio", a.open_ratio), ("dx", a.dx), ("dy", a.dy), ("dz", a.dz), ("dtheta", a.dtheta)];
+    match fields.into_iter().find(|(_, v)| !v.is_finite()) {
+        Some((field, value)) => Err(BadTransition::Action { field, value }),
+        None => Ok(()),
+    }
+}
+
 /// Transitions and episode results → replay rows, without DDS.
 pub struct Ingest {
     eval_env: String,
@@ -82,11 +129,15 @@ impl Ingest {
     }
 
     /// The rows to store now for `t` (none for eval, held expert or malformed transitions).
-    pub fn transition(&mut self, t: &Transition) -> Result<Vec<Stored>, BadFrame> {
+    pub fn transition(&mut self, t: &Transition) -> Result<Vec<Stored>, BadTransition> {
         self.counts.transitions += 1;
         if self.is_eval(&t.obs.env) {
             self.counts.eval += 1;
             return Ok(vec![]);
+        }
+        if let Err(e) = check_values(t) {
+            self.counts.bad += 1;
+            return Err(e);
         }
         let frames = self.frame(&t.obs).and_then(|o| Ok((o, self.frame(&t.next_obs)?)));
         let (obs, next_obs) = frames.inspect_err(|_| self.counts.bad += 1)?;

@@ -86,13 +86,22 @@ fn start_update(home: &mut Option<Learner>) -> Option<Update> {
     }))
 }
 
-/// Hands `t` to the ingest (its rows into `queue`); a refused transition is logged once per reason.
-fn ingest_transition(ingest: &mut Ingest, t: &Transition, queue: &mut Vec<Stored>, bad_logged: &mut HashSet<String>) {
+/// Hands `t` to the ingest (its rows into `queue`); a refused transition is counted and logged once
+/// per sender and kind of defect.
+fn ingest_transition(
+    ingest: &mut Ingest,
+    t: &Transition,
+    queue: &mut Vec<Stored>,
+    bad_logged: &mut HashSet<(String, &'static str)>,
+) {
     match ingest.transition(t) {
         Ok(rows) => queue.extend(rows),
-        Err(e) if bad_logged.insert(e.to_string()) => {
-            warn!("skipping a transition of '{}' (seq {}): {e}", t.obs.env, t.obs.seq)
-        }
+        Err(e) if bad_logged.insert((t.obs.env.clone(), e.cause())) => warn!(
+            "skipping a transition of '{}' (seq {}): {e} (further {} defects of this env are counted, not logged)",
+            t.obs.env,
+            t.obs.seq,
+            e.cause()
+        ),
         Err(_) => {}
     }
 }

@@ -6,7 +6,8 @@
 //!
 //! Loading checks the file against the module first and refuses a file made for another
 //! architecture, naming the first mismatching tensor (missing, wrong shape or unexpected), so a
-//! mismatch never loads half a network.
+//! mismatch never loads half a network, and refuses weights that hold NaN or an infinity (the
+//! module handed in is then dropped: the caller keeps its own copy of the old weights).
 //!
 //! Limitations: weights only. Optimiser state, replay buffer and RNG state belong to the trainer's
 //! checkpoint; constant tensors (kernel bases) are rebuilt at construction and not stored.
@@ -52,6 +53,19 @@ pub enum CheckpointError {
         expected: Vec<usize>,
         /// Shape in the file.
         found: Vec<usize>,
+    },
+    /// A tensor holds NaN or an infinity: weights of a diverged run or a corrupt file, which would
+    /// make the network output NaN.
+    #[error("{path}: tensor `{name}` holds {value} at index {index}: refusing weights that are not finite")]
+    NonFinite {
+        /// File.
+        path: PathBuf,
+        /// Parameter name.
+        name: String,
+        /// Index of the first non-finite value (row-major).
+        index: usize,
+        /// That value.
+        value: f32,
     },
     /// The file has a tensor the network does not.
     #[error(
@@ -140,6 +154,14 @@ fn load_checked<M: Module>(mut module: M, mut store: SafetensorsStore, path: &Pa
     let result = module.load_from(&mut store).map_err(|e| store_err(&e))?;
     if !result.errors.is_empty() || !result.missing.is_empty() {
         return Err(CheckpointError::Store { path: path.into(), message: format!("{result}") });
+    }
+    for t in module.collect(None, None, false) {
+        let name = t.name.clone();
+        let data = burn::store::bridge::into_data(t).map_err(|e| store_err(&e))?;
+        let Ok(values) = data.try_to_vec::<f32>() else { continue };
+        if let Some(index) = values.iter().position(|v| !v.is_finite()) {
+            return Err(CheckpointError::NonFinite { path: path.into(), name, index, value: values[index] });
+        }
     }
     Ok(module)
 }

@@ -7,7 +7,7 @@ mod common;
 use common::{device, randn, values};
 use equiarm_nn::burn::module::Module;
 use equiarm_nn::burn::optim::{AdamConfig, GradientsParams};
-use equiarm_nn::checkpoint::{CheckpointError, load, parameter_shapes, save, to_bytes};
+use equiarm_nn::checkpoint::{CheckpointError, load, load_bytes, parameter_shapes, save, to_bytes};
 use equiarm_nn::diagnostics::equivariance_errors;
 use equiarm_nn::init::Init;
 use equiarm_nn::nets::{Actor, CnnActor, EquiActor, NetConfig};
@@ -78,6 +78,31 @@ fn loading_another_architecture_names_the_first_mismatch() {
 
     // a missing file is an error, not a panic
     assert!(load(EquiActor::new(&cfg(), &Init::new(1), &dev).unwrap(), &tmpfile("nope.safetensors")).is_err());
+}
+
+/// Regression (issue 28): a policy node loaded weights full of NaN and then commanded NaN.
+#[test]
+fn weights_holding_nan_or_infinity_are_refused_naming_the_tensor() {
+    let dev = device();
+    let bytes = to_bytes(&EquiActor::new(&cfg(), &Init::new(1), &dev).unwrap()).unwrap();
+    // safetensors: an 8-byte little-endian header length, the JSON header, then the data; put a
+    // bad value into the 3rd element of `head.weight.0`.
+    let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    let header = std::str::from_utf8(&bytes[8..8 + n]).unwrap();
+    let entry = &header[header.find("\"head.weight.0\"").expect("head.weight.0 in the header")..];
+    let offsets = &entry[entry.find("\"data_offsets\":[").unwrap() + 16..];
+    let start: usize = offsets[..offsets.find(',').unwrap()].trim().parse().unwrap();
+    for bad in [f32::NAN, f32::INFINITY] {
+        let mut b = bytes.clone();
+        let at = 8 + n + start + 2 * 4;
+        b[at..at + 4].copy_from_slice(&bad.to_le_bytes());
+        let fresh = EquiActor::new(&cfg(), &Init::new(2), &dev).unwrap();
+        let err = load_bytes(fresh, b, "PolicyWeights version 3").unwrap_err();
+        assert!(matches!(&err, CheckpointError::NonFinite { name, index: 2, .. } if name == "head.weight.0"), "{err}");
+        assert!(err.to_string().contains("PolicyWeights version 3") && err.to_string().contains("head.weight.0"));
+    }
+    // the untouched bytes still load
+    assert!(load_bytes(EquiActor::new(&cfg(), &Init::new(2), &dev).unwrap(), bytes, "ok").is_ok());
 }
 
 #[test]
