@@ -50,7 +50,7 @@ pub const MAX_BATCH: usize = 4096;
 /// Largest number of envs accepted (the paper: 5).
 pub const MAX_ENVS: usize = 256;
 /// Largest episode step limit accepted (the paper: 50).
-pub const MAX_EPISODE_STEPS: usize = 10_000;
+pub const MAX_EPISODE_STEPS: usize = equiarm_sim::env::MAX_EPISODE_STEPS as usize;
 /// Largest number of evaluation or demonstration episodes accepted (the paper: 100 at most).
 pub const MAX_EPISODES: usize = 100_000;
 

@@ -38,6 +38,9 @@ pub struct Corruption {
     pub gripper_only: bool,
 }
 
+/// Largest episode step limit accepted (the paper's is 50).
+pub const MAX_EPISODE_STEPS: u32 = 10_000;
+
 /// Everything that defines an env (serde: unknown keys are rejected; missing keys take the
 /// defaults of [`EnvConfig::new`] with block picking).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -157,8 +160,11 @@ impl Env {
     /// Builds an env sharing already-loaded assets.
     pub fn with_assets(config: EnvConfig, assets: Arc<Assets>) -> Result<Self> {
         config.params.validate()?;
-        if config.max_steps == 0 {
-            return Err(SimError::Config { field: "max_steps", message: "must be >= 1".into() });
+        if !(1..=MAX_EPISODE_STEPS).contains(&config.max_steps) {
+            return Err(SimError::Config {
+                field: "max_steps",
+                message: format!("{} must be 1..={MAX_EPISODE_STEPS} (the paper's limit is 50)", config.max_steps),
+            });
         }
         let camera = Camera::new(config.camera.clone())?;
         Ok(Self { config, camera, assets, episode: None })

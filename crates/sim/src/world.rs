@@ -87,11 +87,18 @@ impl Default for SimParams {
     }
 }
 
+/// Largest count accepted for each of the `*substeps` fields: physics steps per action (the defaults
+/// are 2–25; a typo of a few more zeros would make one step take minutes and the node look hung).
+pub const MAX_SUBSTEPS: u32 = 1000;
+/// Largest `solver_iterations` accepted (the default is 4).
+pub const MAX_SOLVER_ITERATIONS: usize = 100;
+
 impl SimParams {
     /// Checks the domains: `dt`, `prediction_distance`, `contact_softness_hz`, `contact_damping_ratio`,
     /// `grip_stiffness` and `grip_max_force` finite and > 0; gravity, frictions, `grip_damping` and
-    /// `drawer_resistance` finite and >= 0; `substeps` and `solver_iterations` >= 1. The first value out of
-    /// its domain is a [`SimError::Config`] naming the field.
+    /// `drawer_resistance` finite and >= 0; `substeps` 1..=[`MAX_SUBSTEPS`], the other `*substeps`
+    /// 0..=[`MAX_SUBSTEPS`], `solver_iterations` 1..=[`MAX_SOLVER_ITERATIONS`]. The first value out
+    /// of its domain is a [`SimError::Config`] naming the field.
     pub fn validate(&self) -> Result<()> {
         let pos = |field: &'static str, v: f32| {
             if v.is_finite() && v > 0.0 {
@@ -121,8 +128,24 @@ impl SimParams {
         if self.substeps == 0 {
             return Err(SimError::Config { field: "substeps", message: "must be >= 1".into() });
         }
-        if self.solver_iterations == 0 {
-            return Err(SimError::Config { field: "solver_iterations", message: "must be >= 1".into() });
+        for (field, v) in [
+            ("substeps", self.substeps),
+            ("settle_substeps", self.settle_substeps),
+            ("grip_substeps", self.grip_substeps),
+            ("reset_settle_substeps", self.reset_settle_substeps),
+        ] {
+            if v > MAX_SUBSTEPS {
+                return Err(SimError::Config {
+                    field,
+                    message: format!("{v} is above {MAX_SUBSTEPS} physics steps per action (the default is 2–25)"),
+                });
+            }
+        }
+        if !(1..=MAX_SOLVER_ITERATIONS).contains(&self.solver_iterations) {
+            return Err(SimError::Config {
+                field: "solver_iterations",
+                message: format!("{} must be 1..={MAX_SOLVER_ITERATIONS} (the default is 4)", self.solver_iterations),
+            });
         }
         Ok(())
     }
@@ -260,4 +283,35 @@ impl Scene {
 pub fn yaw_of(q: Rotation) -> f32 {
     let x = q * Vector::X;
     x.y.atan2(x.x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Regression (issue 28): a sim config with a huge settle-substep or solver iteration count
+    /// passed validation, and the node never published nor logged.
+    #[test]
+    fn step_counts_beyond_their_bounds_are_refused_naming_the_field() {
+        assert!(SimParams::default().validate().is_ok());
+        let d = SimParams::default();
+        let cases = [
+            ("substeps", SimParams { substeps: 1_000_000, ..d.clone() }),
+            ("settle_substeps", SimParams { settle_substeps: MAX_SUBSTEPS + 1, ..d.clone() }),
+            ("grip_substeps", SimParams { grip_substeps: u32::MAX, ..d.clone() }),
+            ("reset_settle_substeps", SimParams { reset_settle_substeps: 4_000_000_000, ..d.clone() }),
+            ("solver_iterations", SimParams { solver_iterations: 1 << 40, ..d.clone() }),
+        ];
+        for (field, p) in cases {
+            match p.validate() {
+                Err(SimError::Config { field: f, message }) => {
+                    assert_eq!(f, field);
+                    assert!(message.contains("default"), "{message}");
+                }
+                other => panic!("{field}: {other:?}"),
+            }
+        }
+        let edge = SimParams { settle_substeps: MAX_SUBSTEPS, ..d };
+        assert!(edge.validate().is_ok(), "the bound itself is accepted");
+    }
 }
