@@ -35,6 +35,22 @@ fn bag(dir: &Path) -> PathBuf {
     s.dir.join(&s.files[0])
 }
 
+/// The bytes of `file` with chunk `k` damaged (8 bytes flipped in the middle of its compressed
+/// data), the file's summary, and how many messages that chunk holds.
+fn damaged(file: &Path, k: usize) -> (Vec<u8>, mcap::Summary, usize) {
+    let mut bytes = std::fs::read(file).unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    assert!(summary.chunk_indexes.len() >= 5, "{} chunks", summary.chunk_indexes.len());
+    let victim = &summary.chunk_indexes[k];
+    let in_victim = summary.read_message_indexes(&bytes, victim).unwrap().values().map(Vec::len).sum::<usize>();
+    assert!(in_victim > 0);
+    let mid = (victim.chunk_start_offset + victim.chunk_length / 2) as usize;
+    for b in &mut bytes[mid..mid + 8] {
+        *b ^= 0x5a;
+    }
+    (bytes, summary, in_victim)
+}
+
 fn seqs(r: &Reader, mode: ReadMode) -> Result<(Vec<u64>, equiarm_bag::ReadReport), BagError> {
     let mut got = Vec::new();
     let report = r.for_each(mode, |m| {
@@ -47,18 +63,8 @@ fn seqs(r: &Reader, mode: ReadMode) -> Result<(Vec<u64>, equiarm_bag::ReadReport
 #[test]
 fn a_damaged_chunk_loses_only_its_own_messages_in_reading_and_recovery() {
     let dir = scratch("one_bad_chunk");
-    let file = bag(&dir);
-    let mut bytes = std::fs::read(&file).unwrap();
-    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
-    assert!(summary.chunk_indexes.len() >= 5, "{} chunks", summary.chunk_indexes.len());
+    let (bytes, summary, in_victim) = damaged(&bag(&dir), 2);
     let victim = &summary.chunk_indexes[2];
-    let in_victim = summary.read_message_indexes(&bytes, victim).unwrap().values().map(Vec::len).sum::<usize>();
-    assert!(in_victim > 0);
-    // flip bytes in the middle of its compressed data
-    let mid = (victim.chunk_start_offset + victim.chunk_length / 2) as usize;
-    for b in &mut bytes[mid..mid + 8] {
-        *b ^= 0x5a;
-    }
     let bad = dir.join("bad.mcap");
     std::fs::write(&bad, &bytes).unwrap();
 
@@ -95,15 +101,7 @@ fn a_damaged_chunk_loses_only_its_own_messages_in_reading_and_recovery() {
 #[test]
 fn a_damaged_chunk_in_a_file_without_footer_is_skipped_too() {
     let dir = scratch("cut_and_bad");
-    let file = bag(&dir);
-    let mut bytes = std::fs::read(&file).unwrap();
-    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
-    let victim = &summary.chunk_indexes[1];
-    let in_victim = summary.read_message_indexes(&bytes, victim).unwrap().values().map(Vec::len).sum::<usize>();
-    let mid = (victim.chunk_start_offset + victim.chunk_length / 2) as usize;
-    for b in &mut bytes[mid..mid + 8] {
-        *b ^= 0x5a;
-    }
+    let (bytes, summary, in_victim) = damaged(&bag(&dir), 1);
     // cut the summary and footer off: read record by record
     let data_end = summary.chunk_indexes.iter().map(|c| c.chunk_start_offset + c.chunk_length).max().unwrap() as usize;
     let cut = dir.join("cut.mcap");
