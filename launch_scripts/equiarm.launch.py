@@ -44,7 +44,7 @@ EVAL_SEED_OFFSET = 999
 
 ARGUMENTS = [
     ("task", "block_pulling", "block_pulling, block_pushing, block_picking, drawer_opening or block_in_bowl"),
-    ("preset", "reduced16", "reduced16 (2-core CPU, ~45 min), reduced (hidden 8, 1,250 updates: fast) or paper (the paper's sizes, docs/paper.md §2)"),
+    ("preset", "reduced16", "reduced16 (2-core CPU, ~50 min), reduced (hidden 8, 1,250 updates: fast) or paper (the paper's sizes, docs/paper.md §2)"),
     ("num_envs", "5", "training sim+policy pairs /env0 ... /envN-1"),
     ("seed", "0", "base seed S: env K uses 1000*S+K, the eval env 1000*S+999 (as train.sh)"),
     ("run_dir", "runs/launch", "run directory of the trainer; the bag goes to <run_dir>/bag"),

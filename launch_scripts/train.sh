@@ -15,7 +15,7 @@
 #
 # Options (defaults: block pulling at the reduced16 CPU config, 5 envs, seed 0):
 #   --task T            block_pulling | block_pushing | block_picking | drawer_opening | block_in_bowl
-#   --preset P          reduced16 (2-core CPU, ~45 min) | reduced (hidden 8, 1,250 updates: fast, learns little) | paper (docs/paper.md §2, for a GPU)
+#   --preset P          reduced16 (2-core CPU, ~50 min) | reduced (hidden 8, 1,250 updates: fast, learns little) | paper (docs/paper.md §2, for a GPU)
 #   --config FILE       a JSON run config (launch_scripts/configs/*.json); replaces the preset
 #   --num-envs N        sim+policy pairs (the paper uses 5)
 #   --seed S            base seed

@@ -166,7 +166,7 @@ impl TrainConfig {
     /// 0.75–0.80, too close to 0.8 for a 20-episode evaluation; the extra 2,500 updates are for that.
     /// The annealing lifts the same seeds to 86 and 91 of 100 at 5,000 updates. The figures per seed
     /// and the run times are in `docs/experiments/learning.md`. An Equi update takes about 0.45 s at one thread and
-    /// 0.23 s at two on the default build (about 45 min of training for a run on 2 cores). The
+    /// 0.23 s at two on the default build (about 50 min of training for a run over DDS on 2 cores). The
     /// default preset ([`TrainConfig::DEFAULT_PRESET`]), the main job's. Only block pulling has
     /// been run at this preset.
     pub fn reduced16(task: &str) -> Self {
