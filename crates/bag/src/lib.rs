@@ -27,7 +27,7 @@ mod recover;
 mod writer;
 
 pub use error::BagError;
-pub use reader::{BagInfo, FileInfo, LostChunk, ReadMode, ReadReport, Reader, RecordedMessage, TopicStats};
+pub use reader::{BagInfo, FileInfo, FileRead, LostChunk, ReadMode, ReadReport, Reader, RecordedMessage, TopicStats};
 pub use recover::{RecoverReport, recover};
 pub use writer::{BagSummary, Compression, TopicId, TopicInfo, Writer, WriterOptions};
 

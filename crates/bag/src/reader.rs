@@ -56,8 +56,19 @@ pub struct ReadReport {
     pub truncated: Vec<(PathBuf, String)>,
     /// Chunks skipped because they do not decode (salvage mode only).
     pub lost: Vec<LostChunk>,
-    /// Messages delivered per file, in read order.
-    pub per_file: Vec<u64>,
+    /// What each file gave, in read order.
+    pub per_file: Vec<FileRead>,
+}
+
+/// What a read found in one file.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct FileRead {
+    /// Messages delivered from it.
+    pub messages: u64,
+    /// Whether it ends with a valid footer.
+    pub complete: bool,
+    /// Compression of its first chunk (`""` when none was read).
+    pub compression: String,
 }
 
 /// A chunk whose messages could not be read.
@@ -196,14 +207,19 @@ impl Reader {
             let complete = map.len() >= 2 * MAGIC.len() && map.ends_with(MAGIC) && mcap::read::footer(map).is_ok();
             let summary = if complete { mcap::Summary::read(map).ok().flatten() } else { None };
             let before = report.messages;
+            let mut compression = String::new();
             let read = match summary.filter(|s| !s.chunk_indexes.is_empty()) {
-                Some(s) => read_indexed(path, map, &s, mode, &mut report, &mut f)?,
-                None => read_linear(path, map, complete, mode, &mut report, &mut f)?,
+                Some(s) => {
+                    let first = s.chunk_indexes.iter().min_by_key(|c| c.chunk_start_offset);
+                    compression = first.map(|c| c.compression.clone()).unwrap_or_default();
+                    read_indexed(path, map, &s, mode, &mut report, &mut f)?
+                }
+                None => read_linear(path, map, complete, mode, &mut report, &mut compression, &mut f)?,
             };
             if let Err(e) = read {
                 return Ok(Err(e));
             }
-            report.per_file.push(report.messages - before);
+            report.per_file.push(FileRead { messages: report.messages - before, complete, compression });
         }
         Ok(Ok(report))
     }
@@ -229,9 +245,8 @@ impl Reader {
                 Ok::<(), std::convert::Infallible>(())
             })?
             .unwrap_or_else(|e| match e {});
-        for ((path, map), messages) in self.files.iter().zip(report.per_file) {
-            let complete = map.ends_with(MAGIC) && mcap::read::footer(map).is_ok();
-            let compression = first_compression(map);
+        for ((path, map), read) in self.files.iter().zip(report.per_file) {
+            let FileRead { messages, complete, compression } = read;
             info.files.push(FileInfo { path: path.clone(), size: map.len() as u64, messages, complete, compression });
         }
         (info.truncated, info.lost) = (report.truncated, report.lost);
@@ -348,8 +363,10 @@ fn read_linear<E>(
     complete: bool,
     mode: ReadMode,
     report: &mut ReadReport,
+    compression: &mut String,
     f: &mut impl FnMut(&RecordedMessage<'_>) -> Result<(), E>,
 ) -> Result<Result<(), E>, BagError> {
+    let mut first_chunk = true;
     let reader = mcap::read::LinearReader::new_with_options(map, mcap::read::Options::IgnoreEndMagic.into())
         .map_err(|source| BagError::Mcap { path: path.into(), messages: 0, source })?;
     let mut channels = mcap::read::ChannelAccumulator::<'static>::default();
@@ -364,6 +381,9 @@ fn read_linear<E>(
         };
         let inner: Vec<Record<'static>> = match r {
             Record::Chunk { header, data } => {
+                if std::mem::take(&mut first_chunk) {
+                    compression.clone_from(&header.compression);
+                }
                 let (start, end) = (header.message_start_time, header.message_end_time);
                 match chunk_records(header, &data) {
                     Ok(recs) => recs,
@@ -424,19 +444,4 @@ fn read_linear<E>(
             Ok(Ok(()))
         }
     }
-}
-
-/// The compression of a file's first chunk (`""` when it has none or it cannot be read).
-fn first_compression(map: &[u8]) -> String {
-    let Ok(mut records) = mcap::read::LinearReader::new_with_options(map, mcap::read::Options::IgnoreEndMagic.into())
-    else {
-        return String::new();
-    };
-    records
-        .find_map(|r| match r {
-            Ok(Record::Chunk { header, .. }) => Some(header.compression),
-            Ok(Record::DataEnd(_)) | Err(_) => Some(String::new()),
-            Ok(_) => None,
-        })
-        .unwrap_or_default()
 }

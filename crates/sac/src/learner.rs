@@ -92,6 +92,8 @@ pub struct Learner {
     replay: Replay,
     rng: ChaCha8Rng,
     beta: LinearSchedule,
+    /// The Adam step per update when the config anneals it (`agent.lr_final`).
+    lr: Option<CosineSchedule>,
     transitions: u64,
     last: Option<Metrics>,
 }
@@ -110,12 +112,14 @@ impl Learner {
         let agent = Agent::new_on(cfg.agent.clone(), cfg.seed, &device)?;
         let replay = Replay::new(cfg.replay.clone())?;
         let beta = LinearSchedule { start: cfg.replay.beta_start, end: cfg.replay.beta_end, steps: cfg.total_updates };
+        let lr = cfg.agent.lr_final.map(|end| CosineSchedule { start: cfg.agent.lr, end, steps: cfg.total_updates });
         Ok(Learner {
             rng: crate::rng::stream(cfg.seed, 0x7265_706c),
             cfg,
             agent,
             replay,
             beta,
+            lr,
             transitions: 0,
             last: None,
         })
@@ -176,8 +180,7 @@ impl Learner {
     /// Sample a batch, crop it, update the agent and the priorities.
     pub fn update(&mut self) -> Result<Metrics, LearnerError> {
         let beta = self.beta.value(self.agent.updates());
-        if let Some(end) = self.cfg.agent.lr_final {
-            let lr = CosineSchedule { start: self.cfg.agent.lr, end, steps: self.cfg.total_updates };
+        if let Some(lr) = &self.lr {
             self.agent.set_lr(lr.value(self.agent.updates()));
         }
         let sample = self.replay.sample(self.cfg.batch_size, beta, &mut self.rng)?;
