@@ -384,12 +384,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Bag(BagCommand::Info { bag }) => {
             let info = equiarm_bag::Reader::open(&bag)?.info()?;
-            print!("{}", equiarm_nodes::bag_tools::info_text(&bag, &info));
+            print!("{}", equiarm_train::bag_report::info_text(&bag, &info));
         }
         Command::Bag(BagCommand::Eval { bag, policy: Some(ckpt), net, config, json, .. }) => {
             // A checkpoint or run directory names its architecture in its manifest.
-            let (ckpt, net, cfg) = if equiarm_sac::train::names_checkpoint(&ckpt) {
-                let dir = equiarm_sac::train::find_checkpoint(&ckpt)?;
+            let (ckpt, net, cfg) = if equiarm_train::rundir::names_checkpoint(&ckpt) {
+                let dir = equiarm_train::rundir::find_checkpoint(&ckpt)?;
                 let m = equiarm_sac::learner::read_manifest(&dir)?;
                 let a = &m.config.agent;
                 let cfg = equiarm_nn::nets::NetConfig { hidden: a.hidden, input_size: a.input_size, in_channels: 5 };
@@ -397,12 +397,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             } else {
                 (ckpt, net, config.config(None))
             };
-            let a = equiarm_nodes::policy_eval::evaluate(&bag, &ckpt, &net, &cfg)
+            let a = equiarm_train::policy_eval::evaluate(&bag, &ckpt, &net, &cfg)
                 .with_context(|| format!("evaluating {} on {}", ckpt.display(), bag.display()))?;
             if json {
                 let dims: Vec<_> = (0..5)
                     .map(|d| {
-                        serde_json::json!({"dim": equiarm_nodes::policy_eval::DIMS[d], "mae": a.mae[d],
+                        serde_json::json!({"dim": equiarm_train::policy_eval::DIMS[d], "mae": a.mae[d],
                         "sign_agreement": a.sign[d], "correlation": a.corr[d]})
                     })
                     .collect();
@@ -413,7 +413,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 for d in 0..5 {
                     println!(
                         "{:<8} {:>10.4} {:>14.3} {:>12.3}",
-                        equiarm_nodes::policy_eval::DIMS[d],
+                        equiarm_train::policy_eval::DIMS[d],
                         a.mae[d],
                         a.sign[d],
                         a.corr[d]
@@ -422,7 +422,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
         }
         Command::Bag(BagCommand::Eval { bag, gamma, json, policy: None, .. }) => {
-            let report = equiarm_nodes::bag_tools::eval(&bag, gamma)?;
+            let report = equiarm_train::bag_report::eval(&bag, gamma)?;
             if json {
                 println!("{}", report.json()?);
             } else {
@@ -452,7 +452,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 eprintln!("{}: read up to the last complete chunk ({why})", p.display());
             }
             for l in &r.lost {
-                eprintln!("{}", equiarm_nodes::bag_tools::lost_text(l));
+                eprintln!("{}", equiarm_train::bag_report::lost_text(l));
             }
             println!("recovered {} messages into {}", r.summary.messages, r.summary.dir.display());
         }

@@ -15,10 +15,10 @@ use std::time::{Duration, Instant};
 use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, PolicyWeights, Transition};
 use equiarm_msgs::sensor_msgs::Image;
 use equiarm_msgs::std_msgs::Header;
-use equiarm_nodes::ingest::Ingest;
-use equiarm_nodes::policy::{Policy, PolicyMode, WeightsOutcome};
 use equiarm_sac::agent::{Agent, AgentConfig, ModelKind};
 use equiarm_sac::config::TrainConfig;
+use equiarm_train::ingest::Ingest;
+use equiarm_train::policy::{Policy, PolicyMode, WeightsOutcome};
 
 /// A spawned `equiarm` process whose stderr is collected line by line; killed if a test panics.
 struct Node {

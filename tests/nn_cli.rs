@@ -54,7 +54,7 @@ fn bag_eval_policy_measures_agreement_with_the_recorded_actions() {
     use equiarm_msgs::std_msgs::Header;
     use equiarm_nn::burn::tensor::{Tensor, TensorData};
     use equiarm_nn::nets::Actor;
-    use equiarm_nodes::policy_eval::network_input;
+    use equiarm_train::policy_eval::network_input;
 
     let dir = support::scratch("nn_cli_policy");
     let cfg = NetConfig::reduced_cpu();

@@ -5,16 +5,11 @@
 #[cfg(not(any(feature = "jazzy", feature = "humble")))]
 compile_error!("equiarm_nodes needs a ROS 2 distro feature: `jazzy` (the default) or `humble`");
 
-pub mod bag_tools;
 pub mod cli_values;
 pub mod echo;
-pub mod gate;
-pub mod ingest;
-pub mod lockstep;
 pub mod player;
 pub mod policy;
 pub mod policy_cli;
-pub mod policy_eval;
 pub mod recorder;
 pub mod ros;
 pub mod sim;

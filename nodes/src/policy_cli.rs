@@ -7,7 +7,7 @@ use anyhow::{Context as _, bail};
 use equiarm_sac::agent::{AgentConfig, ModelKind};
 use equiarm_sac::config::TrainConfig;
 
-use crate::policy::PolicyMode;
+use equiarm_train::policy::PolicyMode;
 
 /// Options of `equiarm policy`.
 #[derive(Clone, Debug, clap::Args)]
@@ -63,8 +63,8 @@ pub struct PolicyArgs {
 /// The actor's architecture and initial weights the options describe: (agent config, frame size,
 /// actor file). A directory's manifest wins over the flags.
 pub fn architecture(args: &PolicyArgs) -> anyhow::Result<(AgentConfig, usize, Option<PathBuf>)> {
-    if let Some(path) = args.checkpoint.as_ref().filter(|p| equiarm_sac::train::names_checkpoint(p)) {
-        let dir = equiarm_sac::train::find_checkpoint(path)?;
+    if let Some(path) = args.checkpoint.as_ref().filter(|p| equiarm_train::rundir::names_checkpoint(p)) {
+        let dir = equiarm_train::rundir::find_checkpoint(path)?;
         let m = equiarm_sac::learner::read_manifest(&dir)?;
         return Ok((m.config.agent.clone(), m.config.image_size, Some(dir.join("actor.safetensors"))));
     }

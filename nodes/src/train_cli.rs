@@ -13,7 +13,8 @@ use anyhow::{Context as _, bail};
 use equiarm_nn::burn::tensor::Device;
 use equiarm_sac::agent::ModelKind;
 use equiarm_sac::config::{Augmentation, TrainConfig};
-use equiarm_sac::train::{RunOptions, RunSummary};
+use equiarm_train::inprocess::RunOptions;
+use equiarm_train::record::RunSummary;
 
 /// Options of `equiarm train`.
 #[derive(Clone, Debug, clap::Args)]
@@ -123,7 +124,7 @@ impl TrainArgs {
     pub fn run_dir(&self) -> PathBuf {
         self.run_dir
             .clone()
-            .or_else(|| self.resume.as_deref().and_then(equiarm_sac::train::run_dir_of))
+            .or_else(|| self.resume.as_deref().and_then(equiarm_train::rundir::run_dir_of))
             .unwrap_or_else(|| PathBuf::from("runs/latest"))
     }
 
@@ -175,7 +176,7 @@ impl TrainArgs {
                 other => bail!("unknown --augmentation `{other}`: use rad, drq or center"),
             };
         }
-        cfg.validate()?;
+        equiarm_train::config::check(&cfg)?;
         Ok(cfg)
     }
 }
@@ -189,7 +190,7 @@ pub fn run_in_process(args: &TrainArgs, cfg: TrainConfig) -> anyhow::Result<RunS
     }
     let stop = stop_flag();
     let resume = match &args.resume {
-        Some(p) => Some(equiarm_sac::train::find_checkpoint(p)?),
+        Some(p) => Some(equiarm_train::rundir::find_checkpoint(p)?),
         None => None,
     };
     let opts = RunOptions {
@@ -201,7 +202,7 @@ pub fn run_in_process(args: &TrainArgs, cfg: TrainConfig) -> anyhow::Result<RunS
         force: args.force,
     };
     let flag = stop.clone();
-    let summary = equiarm_sac::train::run(cfg, &opts, &move || flag.load(Ordering::Relaxed))?;
+    let summary = equiarm_train::inprocess::run(cfg, &opts, &move || flag.load(Ordering::Relaxed))?;
     Ok(summary)
 }
 

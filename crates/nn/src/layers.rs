@@ -181,7 +181,7 @@ impl EquivariantConv {
             // frames, saturating the actor's tanh so it could not learn); dividing by k² shrank
             // them ~2× per layer. Dividing the squared norm by k keeps the pre-activation RMS
             // within a small factor of the input's through all 8 layers (measured with
-            // `cargo run -p equiarm_sac --example init_scale`).
+            // `cargo run -p equiarm_train --example init_scale`).
             let total: usize = row.iter().map(|b| b.in_fields * b.len).sum();
             let width = kernel_size as f64;
             let std = if total > 0 { (2.0 * ro.rep.dim() as f64 / total as f64 / width).sqrt() } else { 0.0 };

@@ -934,8 +934,8 @@ mod tests {
 
     #[test]
     fn save_load_continues_bit_identically() {
-        let dir = crate::scratch::Scratch::new("agent");
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir_tmp = tempfile::tempdir().unwrap();
+        let dir = dir_tmp.path();
         let batches: Vec<Batch> = (0..6).map(|i| batch(6, 8, 10 + i)).collect();
         let mut straight = Agent::new(tiny(ModelKind::Equi), 5).unwrap();
         for b in &batches {
@@ -945,10 +945,10 @@ mod tests {
         for b in &batches[..3] {
             first.update(b.clone()).unwrap();
         }
-        first.save(&dir).unwrap();
+        first.save(dir).unwrap();
         drop(first);
         let mut resumed = Agent::new(tiny(ModelKind::Equi), 99).unwrap();
-        resumed.load(&dir).unwrap();
+        resumed.load(dir).unwrap();
         for b in &batches[3..] {
             resumed.update(b.clone()).unwrap();
         }
@@ -966,18 +966,18 @@ mod tests {
         assert_eq!(straight.alpha(), resumed.alpha());
         // A checkpoint of another architecture is refused, naming the file.
         let mut cnn = Agent::new(tiny(ModelKind::Cnn), 0).unwrap();
-        let e = cnn.load(&dir).unwrap_err().to_string();
+        let e = cnn.load(dir).unwrap_err().to_string();
         assert!(e.contains("actor.safetensors"), "{e}");
-        std::fs::remove_dir_all(&dir).ok();
+        std::fs::remove_dir_all(dir).ok();
     }
 
     #[test]
     fn damaged_optimiser_state_is_refused_naming_the_file() {
-        let dir = crate::scratch::Scratch::new("agent_optim");
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir_tmp = tempfile::tempdir().unwrap();
+        let dir = dir_tmp.path();
         let mut a = Agent::new(tiny(ModelKind::Cnn), 1).unwrap();
         a.update(batch(4, 8, 3)).unwrap();
-        a.save(&dir).unwrap();
+        a.save(dir).unwrap();
         // The saved moments are a safetensors file any reader takes: one `.m` and `.v` per parameter.
         let state = crate::tensorfile::read(&dir.join("critic_optim.safetensors")).unwrap();
         assert_eq!(state.meta.get("step").map(String::as_str), Some("1"));
@@ -987,7 +987,7 @@ mod tests {
         let path = dir.join("critic_optim.safetensors");
         let bytes = std::fs::read(&path).unwrap();
         std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
-        let e = Agent::new(tiny(ModelKind::Cnn), 1).unwrap().load(&dir).unwrap_err().to_string();
+        let e = Agent::new(tiny(ModelKind::Cnn), 1).unwrap().load(dir).unwrap_err().to_string();
         assert!(e.contains("critic_optim.safetensors") && e.contains("not a safetensors file"), "{e}");
     }
 }

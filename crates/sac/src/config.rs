@@ -49,8 +49,6 @@ pub const MAX_HIDDEN: usize = 512;
 pub const MAX_BATCH: usize = 4096;
 /// Largest number of envs accepted (the paper: 5).
 pub const MAX_ENVS: usize = 256;
-/// Largest episode step limit accepted (the paper: 50).
-pub const MAX_EPISODE_STEPS: usize = equiarm_sim::env::MAX_EPISODE_STEPS as usize;
 /// Largest number of evaluation or demonstration episodes accepted (the paper: 100 at most).
 pub const MAX_EPISODES: usize = 100_000;
 
@@ -196,21 +194,11 @@ impl TrainConfig {
         }
     }
 
-    /// Check every field; the error names the field and the fix.
+    /// Check the learner's fields; the error names the field and the fix. The task and camera names
+    /// and the episode step limit belong to the simulator: `equiarm_train::config::check` checks
+    /// them, then calls this.
     pub fn validate(&self) -> Result<(), ConfigError> {
         let err = |field: &'static str, message: String| Err(ConfigError { field, message });
-        if equiarm_sim::TaskKind::from_name(&self.task).is_none() {
-            return err(
-                "task",
-                format!(
-                    "unknown task `{}`: use block_pulling, block_pushing, block_picking, drawer_opening or block_in_bowl",
-                    self.task
-                ),
-            );
-        }
-        if equiarm_sim::ViewPreset::from_name(&self.view).is_none() {
-            return err("view", format!("unknown camera preset `{}` (e.g. side, angle15 … angle90)", self.view));
-        }
         let s = self.agent.input_size;
         if !matches!(s, 8 | 16 | 32 | 64 | 128) {
             return err("agent.input_size", format!("{s} must be 8, 16, 32, 64 or 128"));
@@ -257,10 +245,9 @@ impl TrainConfig {
         {
             return err("augmentation", "DrQ needs k ≥ 1 and m ≥ 1 (paper 2 and 2)".into());
         }
-        let bounded: [(&'static str, usize, usize, &str); 5] = [
+        let bounded: [(&'static str, usize, usize, &str); 4] = [
             ("batch_size", self.batch_size, MAX_BATCH, "the paper uses 128"),
             ("num_envs", self.num_envs, MAX_ENVS, "each env is a simulator; the paper runs 5"),
-            ("max_episode_steps", self.max_episode_steps as usize, MAX_EPISODE_STEPS, "the paper's limit is 50"),
             ("eval_episodes", self.eval_episodes, MAX_EPISODES, "the paper evaluates 100"),
             ("demo_episodes", self.demo_episodes, MAX_EPISODES, "the paper uses 20–100"),
         ];
@@ -342,20 +329,17 @@ mod tests {
         let mut c = TrainConfig::reduced("block_pulling");
         c.agent.input_size = 60;
         assert_eq!(c.validate().unwrap_err().field, "agent.input_size");
-        c = TrainConfig::reduced("block_pullin");
-        assert_eq!(c.validate().unwrap_err().field, "task");
     }
 
     #[test]
     fn sizes_above_their_bounds_are_refused_naming_the_field_and_the_bound() {
         type Set = fn(&mut TrainConfig);
         let base = TrainConfig::paper("block_pulling");
-        let cases: [(&str, Set); 8] = [
+        let cases: [(&str, Set); 7] = [
             ("batch_size", |c| c.batch_size = MAX_BATCH + 1),
             ("num_envs", |c| c.num_envs = 1_000_000),
             ("agent.hidden", |c| c.agent.hidden = 100_000_000),
             ("image_size", |c| c.image_size = MAX_IMAGE_SIZE + 1),
-            ("max_episode_steps", |c| c.max_episode_steps = u32::MAX),
             ("eval_episodes", |c| c.eval_episodes = usize::MAX),
             ("demo_episodes", |c| c.demo_episodes = MAX_EPISODES + 1),
             ("training_starts", |c| c.training_starts = c.replay.capacity + 1),

@@ -81,17 +81,11 @@ pub fn read(path: &Path) -> Result<TensorFile, ReadError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scratch::Scratch;
-
-    fn scratch(name: &str) -> Scratch {
-        let dir = Scratch::new(&format!("tensorfile_{name}"));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
-    }
 
     #[test]
     fn tensors_and_metadata_round_trip() {
-        let dir = scratch("round_trip");
+        let dir_tmp = tempfile::tempdir().unwrap();
+        let dir = dir_tmp.path();
         let path = dir.join("state.safetensors");
         let tensors = vec![
             ("b.v".to_string(), vec![2, 3], vec![1.0, -2.5, 3.25, f32::MIN_POSITIVE, 0.0, -0.0]),
@@ -118,7 +112,8 @@ mod tests {
     /// header keys in any order, `__metadata__` first, padded with spaces to 8 bytes.
     #[test]
     fn files_of_the_former_writer_still_read() {
-        let dir = scratch("former");
+        let dir_tmp = tempfile::tempdir().unwrap();
+        let dir = dir_tmp.path();
         let path = dir.join("old.safetensors");
         let header = r#"{"__metadata__":{"step":"3"},"w.m":{"dtype":"F32","shape":[2],"data_offsets":[0,8]},"w.v":{"dtype":"F32","shape":[2],"data_offsets":[8,16]}}"#;
         let mut text = header.as_bytes().to_vec();
@@ -141,7 +136,8 @@ mod tests {
 
     #[test]
     fn bad_files_are_format_errors() {
-        let dir = scratch("bad");
+        let dir_tmp = tempfile::tempdir().unwrap();
+        let dir = dir_tmp.path();
         let short = dir.join("short.safetensors");
         std::fs::write(&short, b"abc").unwrap();
         assert!(matches!(read(&short), Err(ReadError::Format(m)) if m.contains("not a safetensors file")));

@@ -68,8 +68,8 @@ fn main() {
     }
     let eval_every: u64 = std::env::var("EVAL_EVERY").ok().and_then(|v| v.parse().ok()).unwrap_or(0);
     let mut l = Learner::new(cfg.clone()).unwrap();
-    let env_cfg = equiarm_sac::train::env_config(&cfg);
-    let (tried, kept) = equiarm_sac::train::collect_demos(&mut l, &env_cfg).unwrap();
+    let env_cfg = equiarm_train::env::env_config(&cfg).unwrap();
+    let (tried, kept) = equiarm_train::env::collect_demos(&mut l, &env_cfg).unwrap();
     println!("demos {kept}/{tried}, transitions {}", l.replay().len());
     let n_t = l.replay().len();
     let acts: Vec<[f32; 5]> = (0..n_t).filter_map(|i| l.replay().get(i).map(|t| t.action)).collect();
@@ -83,7 +83,7 @@ fn main() {
             let mut c = cfg.clone();
             c.augmentation = equiarm_sac::config::Augmentation::Center;
             let mut l2 = Learner::new(c).unwrap();
-            equiarm_sac::train::collect_demos(&mut l2, &env_cfg).unwrap();
+            equiarm_train::env::collect_demos(&mut l2, &env_cfg).unwrap();
             l2
         };
     }
@@ -120,7 +120,7 @@ fn main() {
     for u in 1..=n {
         let m = l.update().unwrap();
         if eval_every > 0 && u % eval_every == 0 {
-            let e = equiarm_sac::train::evaluate(&mut l, &mut envs, cfg.eval_episodes).unwrap();
+            let e = equiarm_train::evaluation::evaluate(&mut l, &mut envs, cfg.eval_episodes).unwrap();
             println!(
                 "{u} eval success {:.2} over {} episodes, mean length {:.1}",
                 e.success_rate, e.episodes, e.mean_length

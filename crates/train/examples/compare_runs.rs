@@ -10,8 +10,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use clap::{Parser, ValueEnum};
-use equiarm_sac::plot::{Chart, Series, palette, write_png};
-use equiarm_sac::train::EvalResult;
+use equiarm_train::evaluation::EvalResult;
+use equiarm_train::plot::{Chart, Series, palette, write_png};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 #[value(rename_all = "snake_case")]

@@ -32,17 +32,17 @@ fn main() {
 fn run(dir: &std::path::Path, episodes: u64) -> Result<(), Box<dyn std::error::Error>> {
     let cfg: TrainConfig = read_json(&dir.join("config.json"))?;
     let mut l = Learner::new(cfg.clone())?;
-    l.resume(&equiarm_sac::train::find_checkpoint(dir)?)?;
-    let mut env = equiarm_sim::Env::new(equiarm_sac::train::env_config(&cfg))?;
+    l.resume(&equiarm_train::rundir::find_checkpoint(dir)?)?;
+    let mut env = equiarm_sim::Env::new(equiarm_train::env::env_config(&cfg)?)?;
     let (mut wins, mut invalid) = (0, 0);
     for ep in 0..episodes {
-        let mut o = env.reset(equiarm_sac::train::episode_seed(cfg.seed ^ equiarm_sac::train::EVAL, 0, ep))?;
+        let mut o = env.reset(equiarm_train::env::episode_seed(cfg.seed ^ equiarm_train::env::EVAL, 0, ep))?;
         println!("episode {ep}");
         if let Some(scene) = env.scene() {
             println!("  start objects{}", object_positions(scene));
         }
         for t in 0..cfg.max_episode_steps {
-            let f = equiarm_sac::train::frame_of(&o)?;
+            let f = equiarm_train::env::frame_of(&o)?;
             let g = l.act(&[&f], ActMode::Greedy)?[0];
             let e = o.expert_action.to_normalized();
             println!(

@@ -300,28 +300,24 @@ pub fn read_series(dir: &Path, name: &str) -> Result<Vec<(u64, f64)>, MetricsErr
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scratch::Scratch;
-
-    fn scratch(name: &str) -> Scratch {
-        Scratch::new(&format!("metrics_{name}"))
-    }
 
     #[test]
     fn resume_truncates_after_the_checkpoint_and_appends() {
-        let dir = scratch("resume");
-        let mut w = MetricsWriter::create(&dir).unwrap();
+        let dir_tmp = tempfile::tempdir().unwrap();
+        let dir = dir_tmp.path();
+        let mut w = MetricsWriter::create(dir).unwrap();
         for step in [100u64, 200, 300, 400] {
             w.log(step, step as f64 / 100.0, &[("losses/qf1_loss", 1.0 / step as f64)]).unwrap();
         }
         w.log(200, 2.5, &[("eval/success_rate", 0.5)]).unwrap();
         drop(w);
-        let mut w = MetricsWriter::resume(&dir, 250).unwrap();
+        let mut w = MetricsWriter::resume(dir, 250).unwrap();
         assert_eq!(w.last_record(), Some((200, 2.5)));
         w.log(300, 3.7, &[("losses/qf1_loss", 0.25)]).unwrap();
         drop(w);
-        let qf1 = read_series(&dir, "losses/qf1_loss").unwrap();
+        let qf1 = read_series(dir, "losses/qf1_loss").unwrap();
         assert_eq!(qf1, vec![(100, 0.01), (200, 0.005), (300, 0.25)]);
-        assert_eq!(read_series(&dir, "eval/success_rate").unwrap(), vec![(200, 0.5)]);
+        assert_eq!(read_series(dir, "eval/success_rate").unwrap(), vec![(200, 0.5)]);
         let csv = std::fs::read_to_string(dir.join(CSV_FILE)).unwrap();
         let rows: Vec<&str> = csv.lines().collect();
         assert_eq!(
@@ -336,15 +332,17 @@ mod tests {
         );
         assert!(!dir.join("metrics.jsonl.tmp").exists());
         // Resuming where nothing was logged starts fresh files.
-        let empty = scratch("resume_empty");
-        MetricsWriter::resume(&empty, 10).unwrap();
+        let empty_tmp = tempfile::tempdir().unwrap();
+        let empty = empty_tmp.path();
+        MetricsWriter::resume(empty, 10).unwrap();
         assert_eq!(std::fs::read_to_string(empty.join(CSV_FILE)).unwrap(), format!("{CSV_HEADER}\n"));
     }
 
     #[test]
     fn csv_has_header_and_one_row_per_scalar() {
-        let dir = scratch("csv");
-        let mut w = MetricsWriter::create(&dir).unwrap();
+        let dir_tmp = tempfile::tempdir().unwrap();
+        let dir = dir_tmp.path();
+        let mut w = MetricsWriter::create(dir).unwrap();
         w.log(1000, 12.25, &[("charts/SPS", 80.0), ("losses/alpha", f64::NAN), ("odd,name", 1.5)]).unwrap();
         let csv = std::fs::read_to_string(dir.join(CSV_FILE)).unwrap();
         assert_eq!(
@@ -358,21 +356,22 @@ mod tests {
             jsonl,
             "{\"global_step\":1000,\"wall_time\":12.25,\"charts/SPS\":80.0,\"losses/alpha\":null,\"odd,name\":1.5}\n"
         );
-        let alpha = read_series(&dir, "losses/alpha").unwrap();
+        let alpha = read_series(dir, "losses/alpha").unwrap();
         assert_eq!(alpha.len(), 1);
         assert!(alpha[0].1.is_nan());
     }
 
     #[test]
     fn malformed_jsonl_line_is_reported_with_its_number() {
-        let dir = scratch("malformed");
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir_tmp = tempfile::tempdir().unwrap();
+        let dir = dir_tmp.path();
+        std::fs::create_dir_all(dir).unwrap();
         std::fs::write(
             dir.join(JSONL_FILE),
             "{\"global_step\":1,\"wall_time\":0.1,\"a\":1}\n\n{\"global_step\":2,\"wall_time\":0.2,\"a\":2\n{\"global_step\":3,\"wall_time\":0.3,\"a\":3}\n",
         )
         .unwrap();
-        let err = read_series(&dir, "a").unwrap_err();
+        let err = read_series(dir, "a").unwrap_err();
         match &err {
             MetricsError::Malformed { path, line, .. } => {
                 assert_eq!(*line, 3);
@@ -381,32 +380,34 @@ mod tests {
             other => panic!("unexpected {other:?}"),
         }
         assert!(err.to_string().contains("metrics.jsonl:3"), "{err}");
-        assert!(matches!(MetricsWriter::resume(&dir, 10), Err(MetricsError::Malformed { line: 3, .. })));
+        assert!(matches!(MetricsWriter::resume(dir, 10), Err(MetricsError::Malformed { line: 3, .. })));
     }
 
     #[test]
     fn torn_last_line_is_ignored() {
-        let dir = scratch("torn");
-        let mut w = MetricsWriter::create(&dir).unwrap();
+        let dir_tmp = tempfile::tempdir().unwrap();
+        let dir = dir_tmp.path();
+        let mut w = MetricsWriter::create(dir).unwrap();
         w.log(1, 0.5, &[("a", 1.0)]).unwrap();
         drop(w);
         let mut f = OpenOptions::new().append(true).open(dir.join(JSONL_FILE)).unwrap();
         f.write_all(b"{\"global_step\":2,\"wall").unwrap();
         drop(f);
-        assert_eq!(read_series(&dir, "a").unwrap(), vec![(1, 1.0)]);
-        let mut w = MetricsWriter::resume(&dir, 5).unwrap();
+        assert_eq!(read_series(dir, "a").unwrap(), vec![(1, 1.0)]);
+        let mut w = MetricsWriter::resume(dir, 5).unwrap();
         w.log(2, 1.0, &[("a", 2.0)]).unwrap();
-        assert_eq!(read_series(&dir, "a").unwrap(), vec![(1, 1.0), (2, 2.0)]);
+        assert_eq!(read_series(dir, "a").unwrap(), vec![(1, 1.0), (2, 2.0)]);
     }
 
     #[test]
     fn bad_names_are_rejected() {
-        let dir = scratch("names");
-        let mut w = MetricsWriter::create(&dir).unwrap();
+        let dir_tmp = tempfile::tempdir().unwrap();
+        let dir = dir_tmp.path();
+        let mut w = MetricsWriter::create(dir).unwrap();
         assert!(matches!(w.log(1, 0.0, &[("", 1.0)]), Err(MetricsError::BadName { .. })));
         assert!(matches!(w.log(1, 0.0, &[("global_step", 1.0)]), Err(MetricsError::BadName { .. })));
         assert!(matches!(w.log(1, 0.0, &[("a", 1.0), ("a", 2.0)]), Err(MetricsError::DuplicateName { .. })));
-        let missing = read_series(&scratch("nothing_here"), "a").unwrap_err();
+        let missing = read_series(&dir.join("nothing_here"), "a").unwrap_err();
         assert!(missing.to_string().contains("nothing_here"), "{missing}");
     }
 }

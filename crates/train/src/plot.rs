@@ -634,13 +634,6 @@ pub fn write_png(path: &Path, chart: &Chart, series: &[Series]) -> Result<(), Pl
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scratch::Scratch;
-
-    fn scratch(name: &str) -> Scratch {
-        let dir = Scratch::new(&format!("plot_{name}"));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
-    }
 
     /// Renders like [`render`], also returning where the plot landed.
     fn render_framed(chart: &Chart, series: &[Series]) -> (RgbImage, PlotArea) {
@@ -740,7 +733,8 @@ mod tests {
 
     #[test]
     fn png_decodes_at_the_requested_size() {
-        let dir = scratch("size");
+        let dir_tmp = tempfile::tempdir().unwrap();
+        let dir = dir_tmp.path();
         let path = dir.join("curve.png");
         let chart =
             Chart { width: 640, height: 400, ..Chart::new("Block Picking", "environment steps", "success rate") };
@@ -870,7 +864,8 @@ mod tests {
 
     #[test]
     fn bad_input_is_an_error_naming_it() {
-        let dir = scratch("missing");
+        let dir_tmp = tempfile::tempdir().unwrap();
+        let dir = dir_tmp.path();
         let path = dir.join("no_such_dir").join("c.png");
         let err = write_png(&path, &Chart::default(), &[]).unwrap_err();
         assert!(matches!(err, PlotError::MissingDirectory { .. }));

@@ -17,11 +17,11 @@ fn main() {
     let (frame, input, hidden) = (76usize, 64usize, 16usize);
     let mut cfg = TrainConfig::reduced("block_pulling");
     cfg.image_size = frame;
-    let mut env = equiarm_sim::Env::new(equiarm_sac::train::env_config(&cfg)).unwrap();
+    let mut env = equiarm_sim::Env::new(equiarm_train::env::env_config(&cfg).unwrap()).unwrap();
     let mut frames = Vec::new();
     for s in 0..8 {
         let o = env.reset(s).unwrap();
-        frames.push(equiarm_sac::train::frame_of(&o).unwrap());
+        frames.push(equiarm_train::env::frame_of(&o).unwrap());
     }
     let refs: Vec<&equiarm_sac::frame::StoredFrame> = frames.iter().map(|f| &**f).collect();
     let c = equiarm_sac::augment::center_offset(frame, input);

@@ -9,7 +9,8 @@
 use std::path::{Path, PathBuf};
 
 use equiarm_sac::config::TrainConfig;
-use equiarm_sac::train::{RunOptions, find_checkpoint, run};
+use equiarm_train::inprocess::{RunOptions, run};
+use equiarm_train::rundir::find_checkpoint;
 
 fn tiny() -> TrainConfig {
     let mut c = TrainConfig::reduced("block_pulling");
@@ -54,9 +55,9 @@ fn k_updates_straight_equal_half_checkpoint_resume_half() {
     assert!(ck.ends_with("step_0000006"), "{}", ck.display());
     // The run's `checkpoints/latest` pointer file names the same checkpoint (users pass it too).
     let pointer = split_dir.join("checkpoints").join("latest");
-    assert!(equiarm_sac::train::names_checkpoint(&pointer) && equiarm_sac::train::names_checkpoint(&split_dir));
+    assert!(equiarm_train::rundir::names_checkpoint(&pointer) && equiarm_train::rundir::names_checkpoint(&split_dir));
     assert_eq!(find_checkpoint(&pointer).unwrap(), ck);
-    assert!(!equiarm_sac::train::names_checkpoint(&ck.join("actor.safetensors")));
+    assert!(!equiarm_train::rundir::names_checkpoint(&ck.join("actor.safetensors")));
     let resumed =
         run(tiny(), &RunOptions { run_dir: split_dir.clone(), resume: Some(ck), ..Default::default() }, &never)
             .unwrap();

@@ -1,0 +1,114 @@
+//! Greedy evaluation: one result type for both ways a run evaluates its policy: in this process over
+//! fixed-seed episodes ([`evaluate`]), or from the episode results an evaluation env publishes
+//! ([`EvalResult::from_episodes`], the trainer node). Its metric names are [`EvalResult::named`].
+
+use std::sync::Arc;
+
+use equiarm_sac::agent::ActMode;
+use equiarm_sac::frame::StoredFrame;
+use equiarm_sac::learner::Learner;
+use equiarm_sim::{Action, Env};
+use serde::{Deserialize, Serialize};
+
+use crate::TrainError;
+use crate::env::{EVAL, episode_seed, frame_of};
+
+/// Result of one greedy evaluation.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct EvalResult {
+    /// Updates made when evaluated.
+    pub updates: u64,
+    /// Episodes run.
+    pub episodes: usize,
+    /// Fraction of successful episodes.
+    pub success_rate: f64,
+    /// Mean undiscounted return.
+    pub mean_return: f64,
+    /// Mean discounted return (the paper's metric).
+    pub discounted_return: f64,
+    /// Mean episode length.
+    pub mean_length: f64,
+}
+
+/// How one evaluation episode ended.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Episode {
+    /// Whether the task was done.
+    pub success: bool,
+    /// Undiscounted return.
+    pub ret: f64,
+    /// Discounted return.
+    pub discounted: f64,
+    /// Steps.
+    pub length: u32,
+}
+
+impl EvalResult {
+    /// The evaluation of `updates` from its episodes.
+    pub fn from_episodes(updates: u64, episodes: &[Episode]) -> Self {
+        let n = episodes.len().max(1) as f64;
+        let mean = |f: &dyn Fn(&Episode) -> f64| episodes.iter().map(f).sum::<f64>() / n;
+        EvalResult {
+            updates,
+            episodes: episodes.len(),
+            success_rate: mean(&|e| e.success as u8 as f64),
+            mean_return: mean(&|e| e.ret),
+            discounted_return: mean(&|e| e.discounted),
+            mean_length: mean(&|e| e.length as f64),
+        }
+    }
+
+    /// The metrics of an evaluation, by their CleanRL-style names.
+    pub fn named(&self) -> [(&'static str, f64); 5] {
+        [
+            ("eval/success_rate", self.success_rate),
+            ("eval/discounted_return", self.discounted_return),
+            ("eval/episodic_return", self.mean_return),
+            ("eval/episodic_length", self.mean_length),
+            ("eval/updates", self.updates as f64),
+        ]
+    }
+}
+
+/// Evaluate the learner's greedy policy on `episodes` fixed-seed episodes, `n` envs at a time.
+pub fn evaluate(learner: &mut Learner, envs: &mut [Env], episodes: usize) -> Result<EvalResult, TrainError> {
+    let cfg = learner.config().clone();
+    let gamma = cfg.agent.gamma;
+    let mut ended = Vec::with_capacity(episodes);
+    let mut next = 0usize;
+    while next < episodes {
+        let n = envs.len().min(episodes - next);
+        let mut obs: Vec<Option<Arc<StoredFrame>>> = Vec::with_capacity(n);
+        for (i, env) in envs.iter_mut().take(n).enumerate() {
+            let o = env.reset(episode_seed(cfg.seed ^ EVAL, 0, (next + i) as u64))?;
+            obs.push(Some(frame_of(&o)?));
+        }
+        let mut steps = vec![0u32; n];
+        let mut ep_ret = vec![0.0f64; n];
+        let mut ep_disc = vec![0.0f64; n];
+        while obs.iter().any(|o| o.is_some()) {
+            let live: Vec<usize> = (0..n).filter(|&i| obs[i].is_some()).collect();
+            let frames: Vec<&StoredFrame> = live.iter().map(|&i| obs[i].as_deref().expect("live")).collect();
+            let actions = learner.act(&frames, ActMode::Greedy)?;
+            for (&i, a) in live.iter().zip(actions) {
+                let r = envs[i].step(&Action::from_normalized(a))?;
+                ep_ret[i] += r.reward as f64;
+                ep_disc[i] += gamma.powi(steps[i] as i32) * r.reward as f64;
+                steps[i] += 1;
+                if r.done {
+                    ended.push(Episode {
+                        success: r.info.success,
+                        ret: ep_ret[i],
+                        discounted: ep_disc[i],
+                        length: steps[i],
+                    });
+                    obs[i] = None;
+                } else {
+                    obs[i] = Some(frame_of(&r.observation)?);
+                }
+            }
+        }
+        next += n;
+    }
+    Ok(EvalResult::from_episodes(learner.updates(), &ended))
+}

@@ -1,0 +1,89 @@
+//! equiarm_train: a training run around the learner ([`equiarm_sac`]), with no ROS in it.
+//!
+//! - [`inprocess`]: the transport-free training loop (`equiarm train --in-process`).
+//! - [`env`]: the simulator side: env configs, episode seeds, frames, expert demonstrations.
+//! - [`evaluation`]: greedy evaluations, in-process or from published episode results.
+//! - [`record`], [`rundir`]: what a run writes (config, metrics, evaluations, checkpoints) and its
+//!   directory's layout and lock.
+//! - [`config`]: the config checks that need the simulator.
+//! - [`metrics`], [`plot`], [`progress`]: CleanRL-style scalar logs, the learning-curve PNG and
+//!   the progress line.
+//!
+//! The nodes' logic, without DDS (the nodes in `equiarm_nodes` are adapters around it):
+//! - [`trainer`], [`ingest`], [`lockstep`]: the trainer node's decisions, its intake of transitions and episode results, and
+//!   its deterministic rounds.
+//! - [`policy`], [`gate`]: the policy node's acting and when it answers.
+//! - [`policy_eval`], [`bag_report`]: an actor replayed on a recorded bag; `bag info` and
+//!   `bag eval` texts.
+
+use std::fmt::Display;
+use std::path::{Path, PathBuf};
+
+use thiserror::Error;
+
+pub mod bag_report;
+pub mod config;
+pub mod env;
+pub mod evaluation;
+pub mod gate;
+pub mod ingest;
+pub mod inprocess;
+pub mod lockstep;
+pub mod metrics;
+pub mod plot;
+pub mod policy;
+pub mod policy_eval;
+pub mod progress;
+pub mod record;
+pub mod rundir;
+pub mod trainer;
+
+/// Errors of a training run.
+#[derive(Debug, Error)]
+pub enum TrainError {
+    /// The config failed its checks.
+    #[error(transparent)]
+    Config(#[from] equiarm_sac::config::ConfigError),
+    /// The learner failed.
+    #[error(transparent)]
+    Learner(#[from] equiarm_sac::learner::LearnerError),
+    /// The simulator failed.
+    #[error("simulator: {0}")]
+    Sim(#[from] equiarm_sim::SimError),
+    /// A frame could not be stored.
+    #[error("frame: {0}")]
+    Frame(#[from] equiarm_sac::frame::FrameError),
+    /// The simulator rendered a frame that is not square.
+    #[error("frame is {width}×{height}, must be square")]
+    NotSquare {
+        /// Width in pixels.
+        width: usize,
+        /// Height in pixels.
+        height: usize,
+    },
+    /// Run-directory I/O.
+    #[error("{path}: {message}")]
+    Io {
+        /// File or directory.
+        path: PathBuf,
+        /// What failed.
+        message: String,
+    },
+    /// The expert did not produce enough successful demos.
+    #[error("the expert succeeded in {got} of {tried} demo episodes; {want} needed")]
+    Demos {
+        /// Successes.
+        got: usize,
+        /// Episodes tried.
+        tried: usize,
+        /// Needed.
+        want: usize,
+    },
+}
+
+impl TrainError {
+    /// An I/O error about `path`.
+    pub fn io(path: &Path, e: impl Display) -> Self {
+        TrainError::Io { path: path.to_path_buf(), message: e.to_string() }
+    }
+}

@@ -1,0 +1,305 @@
+//! The policy node's acting, without DDS: it answers each `Observation` with a `GripperCommand`
+//! naming its seq, and in the learning modes (`sample`, `greedy`) takes new actor weights.
+//!
+//! Modes: `sample` (tanh(mean + std·ε), exploration), `greedy` (tanh(mean), evaluation), `expert`
+//! (sends back the Observation's `expert_action`, source EXPERT), `random` (uniform in [-1, 1]^5 from
+//! the seeded RNG, source RANDOM). A re-published Observation (same seq) gets the identical command.
+//! When to answer (at once, `--max-lead` flow control, `--deterministic` lock-step) is [`crate::gate`]'s.
+//! The sampling noise comes from the actor's RNG seeded with `--seed` (5 normals per sampled action),
+//! so the same observations answered in the same order give the same actions.
+//!
+//! ## Limitations
+//! One env per node. Acting is on the runtime thread (batch 1), so a slow actor delays weights too.
+
+use std::collections::VecDeque;
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::Context as _;
+use equiarm_msgs::ImageError;
+use equiarm_msgs::msg::{GripperCommand, Observation, PolicyWeights};
+use equiarm_sac::agent::{ActMode, Agent, AgentConfig, ModelKind};
+use equiarm_sac::frame::{FrameError, StoredFrame};
+use equiarm_sim::{Action, rng::Rng};
+use log::warn;
+
+use crate::gate::Standing;
+
+/// How the node acts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum PolicyMode {
+    /// Sampled actions of the actor (training envs).
+    Sample,
+    /// The actor's mean action (evaluation envs).
+    Greedy,
+    /// The Observation's expert action (demonstrations).
+    Expert,
+    /// Uniform random actions.
+    Random,
+}
+
+/// Why an Observation's images make no frame (or, at the trainer, not one of the run's size).
+#[derive(Debug, thiserror::Error)]
+pub enum BadFrame {
+    /// The colour image is not rgb8 of its stated size.
+    #[error("colour: {0}")]
+    Color(ImageError),
+    /// The depth image is not 32FC1 of its stated size.
+    #[error("depth: {0}")]
+    Depth(ImageError),
+    /// Colour and depth differ in size.
+    #[error("colour is {}×{}, depth {}×{}", color.0, color.1, depth.0, depth.1)]
+    Mismatch {
+        /// Colour width and height.
+        color: (u32, u32),
+        /// Depth width and height.
+        depth: (u32, u32),
+    },
+    /// Not square, too large, or a depth that is not finite.
+    #[error(transparent)]
+    Frame(#[from] FrameError),
+    /// A frame of another size than the run's (trainer).
+    #[error("frame of {got} px, the run's image_size is {want}")]
+    Size {
+        /// The frame's side.
+        got: usize,
+        /// The run's `image_size`.
+        want: usize,
+    },
+}
+
+/// Why the policy could not answer an Observation.
+#[derive(Debug, thiserror::Error)]
+pub enum AnswerError {
+    /// Its images make no frame.
+    #[error(transparent)]
+    Frame(#[from] BadFrame),
+    /// The actor failed on it.
+    #[error("acting: {0}")]
+    Act(#[from] equiarm_sac::learner::LearnerError),
+}
+
+/// The physical action a GripperCommand (or a Transition's action) carries.
+pub fn action_of(c: &GripperCommand) -> Action {
+    Action::new(c.open_ratio, c.dx, c.dy, c.dz, c.dtheta)
+}
+
+/// The frame of an Observation (rgb8 colour, 32FC1 depth, holding); the error says what is wrong.
+pub fn frame_of(obs: &Observation) -> Result<StoredFrame, BadFrame> {
+    let color = obs.color.rgb8_data().map_err(BadFrame::Color)?;
+    let depth = obs.depth.float32_values().map_err(BadFrame::Depth)?;
+    if (obs.color.width, obs.color.height) != (obs.depth.width, obs.depth.height) {
+        return Err(BadFrame::Mismatch {
+            color: (obs.color.width, obs.color.height),
+            depth: (obs.depth.width, obs.depth.height),
+        });
+    }
+    Ok(StoredFrame::from_image(
+        obs.color.width as usize,
+        obs.color.height as usize,
+        color.to_vec(),
+        &depth,
+        obs.holding,
+    )?)
+}
+
+/// What became of a PolicyWeights sample.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum WeightsOutcome {
+    /// Loaded: the node now acts with this version.
+    Loaded,
+    /// Not newer than the current version; ignored.
+    Stale,
+    /// Another model or format: refused (the reason, logged once per reason).
+    Refused(String),
+    /// The payload did not load; the old weights stay.
+    Failed(String),
+}
+
+/// The acting logic, without DDS.
+pub struct Policy {
+    mode: PolicyMode,
+    agent: Option<Agent>,
+    frame_size: usize,
+    rng: Rng,
+    last: Option<(u64, GripperCommand)>,
+    version: u64,
+    latencies: VecDeque<f64>,
+    actions: u64,
+    expert_episodes: u32,
+    policy_steps: u64,
+    answered: u64,
+}
+
+impl Policy {
+    /// A policy acting in `mode`; the learning modes build an actor of `agent` (seeded with `seed`),
+    /// loaded from `actor` if given.
+    pub fn new(
+        mode: PolicyMode,
+        agent: AgentConfig,
+        frame_size: usize,
+        actor: Option<&Path>,
+        seed: u64,
+    ) -> anyhow::Result<Self> {
+        let agent = match mode {
+            PolicyMode::Sample | PolicyMode::Greedy => {
+                let mut a = Agent::new(agent, seed).context("building the actor")?;
+                if let Some(p) = actor {
+                    a.load_actor(p).with_context(|| format!("loading the actor {}", p.display()))?;
+                }
+                Some(a)
+            }
+            _ => None,
+        };
+        Ok(Policy {
+            mode,
+            agent,
+            frame_size,
+            rng: Rng::new(seed),
+            last: None,
+            version: 0,
+            latencies: VecDeque::new(),
+            actions: 0,
+            expert_episodes: 0,
+            policy_steps: 0,
+            answered: 0,
+        })
+    }
+
+    /// Answer episodes `0..k` of the env with the expert.
+    pub fn with_expert_episodes(mut self, k: u32) -> Self {
+        self.expert_episodes = k;
+        self
+    }
+
+    /// Where the node stands if it answered `obs` now (what [`crate::gate::Gate`] decides on).
+    pub fn progress(&self, obs: &Observation) -> Standing {
+        let repeat = self.last.as_ref().is_some_and(|(seq, _)| *seq == obs.seq);
+        let policy_step = !repeat && self.mode != PolicyMode::Expert && obs.episode >= self.expert_episodes;
+        Standing {
+            repeat,
+            policy_step,
+            policy_steps: self.policy_steps,
+            answered: self.answered,
+            version: self.version,
+        }
+    }
+
+    /// Whether this mode takes weights from the trainer.
+    pub fn learns(&self) -> bool {
+        self.agent.is_some()
+    }
+
+    /// Version of the weights in use (0: the initial ones).
+    pub fn version(&self) -> u64 {
+        self.version
+    }
+
+    /// The command answering `obs` (the same one again for a re-published seq).
+    pub fn answer(&mut self, obs: &Observation) -> Result<GripperCommand, AnswerError> {
+        if let Some((seq, cmd)) = &self.last
+            && *seq == obs.seq
+        {
+            return Ok(cmd.clone());
+        }
+        let expert = obs.episode < self.expert_episodes;
+        if !expert && self.mode != PolicyMode::Expert {
+            self.policy_steps += 1;
+        }
+        let (u, source) = match (if expert { PolicyMode::Expert } else { self.mode }, self.agent.as_mut()) {
+            (PolicyMode::Expert, _) => {
+                let source = GripperCommand::SOURCE_EXPERT;
+                return Ok(self.remember(GripperCommand {
+                    header: obs.header.clone(),
+                    obs_seq: obs.seq,
+                    source,
+                    ..obs.expert_action.clone()
+                }));
+            }
+            (PolicyMode::Random, _) | (_, None) => {
+                ([(); 5].map(|_| self.rng.uniform(-1.0, 1.0)), GripperCommand::SOURCE_RANDOM)
+            }
+            (mode, Some(agent)) => {
+                let frame = frame_of(obs)?;
+                if frame.size() != self.frame_size && self.actions == 0 {
+                    warn!(
+                        "frames are {} px, the actor was set up for {} px (acting on the centre crop anyway)",
+                        frame.size(),
+                        self.frame_size
+                    );
+                }
+                let (act, s) = (
+                    if mode == PolicyMode::Greedy { ActMode::Greedy } else { ActMode::Sample },
+                    agent.config().input_size,
+                );
+                let t0 = Instant::now();
+                let u = equiarm_sac::learner::act_on(agent, &[&frame], s, act)?;
+                self.record_latency(t0.elapsed().as_secs_f64());
+                (u[0], GripperCommand::SOURCE_POLICY)
+            }
+        };
+        let a = Action::from_normalized(u);
+        let (header, obs_seq) = (obs.header.clone(), obs.seq);
+        let cmd = GripperCommand {
+            header,
+            obs_seq,
+            open_ratio: a.open_ratio,
+            dx: a.dx,
+            dy: a.dy,
+            dz: a.dz,
+            dtheta: a.dtheta,
+            source,
+        };
+        Ok(self.remember(cmd))
+    }
+
+    fn remember(&mut self, cmd: GripperCommand) -> GripperCommand {
+        self.last = Some((cmd.obs_seq, cmd.clone()));
+        self.answered += 1;
+        cmd
+    }
+
+    fn record_latency(&mut self, s: f64) {
+        if self.latencies.len() == 100 {
+            self.latencies.pop_front();
+        }
+        self.latencies.push_back(s);
+        self.actions += 1;
+    }
+
+    /// Median and p95 of the last 100 actor latencies in ms, once every 100 actions.
+    pub fn latency_report(&self) -> Option<(f64, f64)> {
+        if self.actions == 0 || !self.actions.is_multiple_of(100) {
+            return None;
+        }
+        let mut v: Vec<f64> = self.latencies.iter().copied().collect();
+        v.sort_by(f64::total_cmp);
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize] * 1e3;
+        Some((at(0.5), at(0.95)))
+    }
+
+    /// Takes new weights if they are ours and newer (the payload moves into the actor, uncopied).
+    pub fn on_weights(&mut self, w: PolicyWeights) -> WeightsOutcome {
+        let Some(agent) = self.agent.as_mut() else {
+            return WeightsOutcome::Refused(format!("mode {:?} takes no weights", self.mode));
+        };
+        let ours = agent.config().model.name();
+        if ModelKind::parse(&w.model) != Some(agent.config().model) {
+            return WeightsOutcome::Refused(format!("model '{}' is not this node's '{ours}'", w.model));
+        }
+        if w.format != "safetensors" {
+            return WeightsOutcome::Refused(format!("format '{}' is not 'safetensors'", w.format));
+        }
+        if w.version <= self.version {
+            return WeightsOutcome::Stale;
+        }
+        let label = format!("PolicyWeights version {}", w.version);
+        match agent.load_actor_bytes(w.data, &label).map_err(|e| e.to_string()) {
+            Ok(()) => {
+                self.version = w.version;
+                WeightsOutcome::Loaded
+            }
+            Err(e) => WeightsOutcome::Failed(e),
+        }
+    }
+}
