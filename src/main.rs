@@ -473,7 +473,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 let opts = RosOptions::from_env()?;
                 runtime()?.block_on(equiarm_nodes::trainer::run(&args, cfg, &opts))?
             };
-            equiarm_nodes::train_cli::print_summary(&summary);
+            println!("{summary}");
         }
         Command::Policy(args) => {
             let opts = RosOptions::from_env()?;

@@ -7,11 +7,13 @@ compile_error!("equiarm_nodes needs a ROS 2 distro feature: `jazzy` (the default
 
 pub mod cli_values;
 pub mod echo;
+pub mod endpoints;
 pub mod player;
 pub mod policy;
 pub mod policy_cli;
 pub mod recorder;
 pub mod ros;
+pub mod signals;
 pub mod sim;
 pub mod train_cli;
 pub mod trainer;

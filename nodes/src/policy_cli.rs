@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
 use equiarm_sac::agent::{AgentConfig, ModelKind};
-use equiarm_sac::config::TrainConfig;
+use equiarm_sac::config::{Preset, TrainConfig};
 
 use equiarm_train::policy::PolicyMode;
 
@@ -68,7 +68,7 @@ pub fn architecture(args: &PolicyArgs) -> anyhow::Result<(AgentConfig, usize, Op
         let m = equiarm_sac::learner::read_manifest(&dir)?;
         return Ok((m.config.agent.clone(), m.config.image_size, Some(dir.join("actor.safetensors"))));
     }
-    let preset = TrainConfig::preset(TrainConfig::DEFAULT_PRESET, "block_pulling").context("the default preset")?;
+    let preset = TrainConfig::preset(Preset::DEFAULT, "block_pulling");
     let mut agent = preset.agent.clone();
     let mut frame = preset.image_size;
     if let Some(m) = &args.model {

@@ -17,15 +17,19 @@
 
 use std::collections::HashMap;
 use std::net::Ipv4Addr;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Duration;
 
-use anyhow::{Context as _, anyhow, bail};
+use anyhow::{anyhow, bail};
 use equiarm_msgs::RosMessage;
+
+use crate::endpoints::BadInputLog;
+pub use crate::endpoints::{Publisher, Subscriber};
+pub use crate::signals::shutdown_signal;
 use log::{debug, info, warn};
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
 use ros2_client::qos::{Durability, History, QosProfile, WhenFull};
-use ros2_client::{Context, MessageInfo, MessageTypeName, Name, Node, NodeName, NodeOptions, ReadError};
+use ros2_client::{Context, MessageTypeName, Name, Node, NodeName, NodeOptions};
 
 /// QoS profiles of the equiarm topic graph (docs/architecture.md#qos).
 pub mod qos {
@@ -102,7 +106,7 @@ impl RosOptions {
 /// A ROS 2 node with its DDS participant and spinner. Dropping it leaves the graph cleanly.
 pub struct RosNode {
     // Field order matters: the node is dropped before its context.
-    node: Node,
+    pub(crate) node: Node,
     context: Context,
     fqn: String,
     bad_input: Arc<BadInputLog>,
@@ -201,131 +205,6 @@ impl RosNode {
     /// Waits until a subscription has matched at least one publisher, up to `timeout`.
     pub async fn wait_for_publisher<M: RosMessage>(&self, sub: &Subscriber<M>, timeout: Duration) -> bool {
         tokio::time::timeout(timeout, sub.inner.wait_for_publisher(&self.node)).await.is_ok()
-    }
-}
-
-/// Counts of dropped payloads, shared by the subscriptions of one node.
-#[derive(Default)]
-struct BadInputLog {
-    counts: Mutex<HashMap<String, u64>>,
-}
-
-impl BadInputLog {
-    /// Counts one bad payload on `topic`; returns the new count (1 means: log it).
-    fn record(&self, topic: &str) -> u64 {
-        let mut c = self.counts.lock().unwrap_or_else(|p| p.into_inner());
-        let n = c.entry(topic.to_string()).or_insert(0);
-        *n += 1;
-        *n
-    }
-
-    fn counts(&self) -> HashMap<String, u64> {
-        self.counts.lock().unwrap_or_else(|p| p.into_inner()).clone()
-    }
-}
-
-/// A typed publisher; [`Publisher::publish`] never blocks the runtime for long (reliable writers wait
-/// at most 100 ms for window space, then report an error).
-pub struct Publisher<M: RosMessage> {
-    inner: ros2_client::Publisher<M>,
-    topic: String,
-}
-
-impl<M: RosMessage> Publisher<M> {
-    /// Publishes `msg`; the error names the topic and type.
-    pub async fn publish(&self, msg: M) -> anyhow::Result<()> {
-        self.inner
-            .async_publish(msg)
-            .await
-            .map_err(|e| anyhow!("publishing {} on '{}': {e:?}", M::TYPE_NAME, self.topic))
-    }
-
-    /// The topic name as given at creation.
-    pub fn topic(&self) -> &str {
-        &self.topic
-    }
-
-    /// Subscriptions matched so far (0 until the first match).
-    pub fn subscription_count(&self, node: &RosNode) -> usize {
-        self.inner.get_subscription_count(&node.node)
-    }
-}
-
-/// A typed subscription that survives bad input.
-pub struct Subscriber<M: RosMessage> {
-    inner: ros2_client::Subscription<M>,
-    topic: String,
-    log: Arc<BadInputLog>,
-}
-
-impl<M: RosMessage> Subscriber<M> {
-    /// The next message that decodes, with its metadata. A payload that does not decode as `M` is
-    /// counted, logged (the first time per topic, with topic and type), and skipped; reading goes on.
-    /// Returns an error only if the middleware itself fails (reader closed).
-    pub async fn recv(&self) -> anyhow::Result<(M, MessageInfo)> {
-        loop {
-            match self.inner.async_take().await {
-                Ok(v) => return Ok(v),
-                Err(ReadError::Deserialization { reason }) => {
-                    if self.log.record(&self.topic) == 1 {
-                        warn!(
-                            "dropping a payload on '{}' that does not decode as {}: {reason} \
-                             (further ones on this topic are only counted)",
-                            self.topic,
-                            M::TYPE_NAME
-                        );
-                    }
-                }
-                Err(ReadError::Closed) => bail!("subscription to '{}' ({}) closed", self.topic, M::TYPE_NAME),
-                Err(e) => {
-                    warn!("reading '{}' ({}): {e}; retrying", self.topic, M::TYPE_NAME);
-                    tokio::time::sleep(Duration::from_millis(10)).await;
-                }
-            }
-        }
-    }
-
-    /// As [`Self::recv`] but gives up after `timeout` (`Ok(None)`).
-    pub async fn recv_timeout(&self, timeout: Duration) -> anyhow::Result<Option<(M, MessageInfo)>> {
-        match tokio::time::timeout(timeout, self.recv()).await {
-            Ok(r) => r.map(Some),
-            Err(_) => Ok(None),
-        }
-    }
-
-    /// The topic name as given at creation.
-    pub fn topic(&self) -> &str {
-        &self.topic
-    }
-
-    /// Publishers matched so far, as this node has discovered them (the remote side may not have
-    /// matched this subscription yet).
-    pub fn publisher_count(&self, node: &RosNode) -> usize {
-        self.inner.get_publisher_count(&node.node)
-    }
-
-    /// Payloads dropped on this topic so far.
-    pub fn bad_input_count(&self) -> u64 {
-        self.log.counts().get(&self.topic).copied().unwrap_or(0)
-    }
-}
-
-/// Resolves when the process gets SIGINT (Ctrl-C) or SIGTERM; nodes select on it to shut down cleanly.
-pub async fn shutdown_signal() -> anyhow::Result<&'static str> {
-    #[cfg(unix)]
-    {
-        use tokio::signal::unix::{SignalKind, signal};
-        let mut term = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
-        let mut int = signal(SignalKind::interrupt()).context("installing the SIGINT handler")?;
-        tokio::select! {
-            _ = term.recv() => Ok("SIGTERM"),
-            _ = int.recv() => Ok("SIGINT"),
-        }
-    }
-    #[cfg(not(unix))]
-    {
-        tokio::signal::ctrl_c().await.context("installing the Ctrl-C handler")?;
-        Ok("Ctrl-C")
     }
 }
 

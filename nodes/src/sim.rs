@@ -1,5 +1,6 @@
 //! `equiarm sim`: one simulated environment ([`equiarm_sim::Env`]) on the ROS 2 graph, in the
-//! lock-step protocol of docs/architecture.md#the-loop-over-dds. The node only maps topics to library calls:
+//! lock-step protocol of docs/architecture.md#the-loop-over-dds. The node only maps topics to library
+//! calls ([`equiarm_train::stepper`] makes the messages):
 //!
 //! - publishes an `Observation` (seq, env, episode, step, rgb8 colour, 32FC1 depth in metres, holding,
 //!   the expert's action with `source = EXPERT` and `obs_seq = seq`) on `observation` (relative to the
@@ -15,7 +16,7 @@
 //! only the `next_obs` of its last Transition (and a camera frame): nothing answers it, so the
 //! `observation` topic skips that one seq at each episode boundary.
 //!
-//! Stamps come from a simulated clock: one tick of [`SimClock::step_ns`] (the physics time of one env
+//! Stamps come from a simulated clock: one tick of [`equiarm_train::stepper::SimClock::step_ns`] (the physics time of one env
 //! step, `dt * substeps`) per observation made, from 0; wall time is never read. With `--clock` the
 //! node also publishes that time on `/clock` (`rosgraph_msgs/msg/Clock`, reliable keep-last 10, which
 //! matches rclpy's and rclcpp's best-effort clock subscriptions too) just before each publication of
@@ -34,16 +35,11 @@ use equiarm_msgs::builtin_interfaces::Time;
 use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, Transition};
 use equiarm_msgs::rosgraph_msgs::Clock;
 use equiarm_msgs::sensor_msgs::{CameraInfo, Image};
-use equiarm_msgs::std_msgs::Header;
-use equiarm_sim::{Action, Env, EnvConfig, SimError, TaskKind, ViewPreset, rng::Rng};
-use log::{debug, info, warn};
+use equiarm_sim::{Env, EnvConfig, TaskKind, ViewPreset};
+use equiarm_train::stepper::{SimStats, Step, Stepper};
+use log::{debug, info};
 
 use crate::ros::{Publisher, RosNode, RosOptions, qos, shutdown_signal};
-
-/// Frame of observations, transitions and commands.
-pub const WORLD_FRAME: &str = "world";
-/// Frame of the camera images and `CameraInfo` (optical convention: z forward, x right, y down).
-pub const CAMERA_FRAME: &str = "camera_optical_frame";
 
 /// Options of `equiarm sim` (the command line parses straight into this).
 #[derive(Clone, Debug, clap::Args)]
@@ -134,52 +130,6 @@ pub fn parse_view(name: &str) -> anyhow::Result<ViewPreset> {
     })
 }
 
-/// Simulated time: `ticks * step_ns` nanoseconds.
-#[derive(Clone, Copy, Debug)]
-pub struct SimClock {
-    /// Simulated time of one env step, ns: `dt * substeps` of the physics settings, rounded.
-    pub step_ns: i64,
-    /// Ticks taken so far (one per observation made); the next stamp is `ticks * step_ns`.
-    pub ticks: i64,
-}
-
-impl SimClock {
-    /// A clock at time 0 whose tick is one env step of `cfg`'s physics (`dt * substeps` seconds).
-    pub fn new(cfg: &EnvConfig) -> Self {
-        let step_s = cfg.params.dt as f64 * cfg.params.substeps as f64;
-        Self { step_ns: (step_s * 1e9).round() as i64, ticks: 0 }
-    }
-
-    /// The stamp of the next frame; advances the clock.
-    pub fn tick(&mut self) -> Time {
-        let t = Time::from_nanos(self.ticks.saturating_mul(self.step_ns));
-        self.ticks += 1;
-        t
-    }
-}
-
-/// What a run did (also logged at shutdown).
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct SimStats {
-    /// Env steps taken (commands applied).
-    pub steps: u64,
-    /// Episodes that ended (and had their `EpisodeResult` published).
-    pub episodes: u64,
-    /// Times an Observation was published again because no command for it came within the timeout.
-    pub republished: u64,
-    /// Commands ignored because their `obs_seq` was not that of the Observation waited on.
-    pub wrong_seq: u64,
-    /// Commands for the awaited Observation rejected because a field was NaN or infinite.
-    pub rejected: u64,
-}
-
-/// The names of the non-finite fields of a command, e.g. `dx=NaN, dtheta=inf`; None if all are finite.
-pub fn non_finite_fields(c: &GripperCommand) -> Option<String> {
-    let fields = [("open_ratio", c.open_ratio), ("dx", c.dx), ("dy", c.dy), ("dz", c.dz), ("dtheta", c.dtheta)];
-    let bad: Vec<String> = fields.iter().filter(|(_, v)| !v.is_finite()).map(|(n, v)| format!("{n}={v}")).collect();
-    (!bad.is_empty()).then(|| bad.join(", "))
-}
-
 /// Runs the node until `args.episodes` episodes ended, or SIGINT/SIGTERM.
 pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> {
     let cfg = env_config(args)?;
@@ -187,7 +137,8 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
     if env_name.is_empty() || env_name.contains('/') {
         bail!("--namespace '{}' must be one level, like /env0", args.namespace);
     }
-    let mut env = Env::new(cfg.clone()).context("building the simulated env")?;
+    let task = cfg.task.name();
+    let mut sim = Stepper::new(cfg, &env_name, args.seed, args.eval).context("building the simulated env")?;
     let mut node = RosNode::new(&args.namespace, "sim", opts)?;
     let obs_pub = node.publisher::<Observation>("observation", qos::command())?;
     let transition_pub = node.publisher::<Transition>("/transitions", qos::stream(100))?;
@@ -200,26 +151,17 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
         }
         Ok(())
     };
-    let camera = CameraPublishers::new(&mut node, &env)?;
+    let camera = CameraPublishers::new(&mut node, sim.env())?;
     let timeout = Duration::from_millis(args.timeout_ms.max(1));
-    let task = cfg.task.name();
     info!("{}: task {task}, seed {}, env '{env_name}', re-publish after {timeout:?}", node.name(), args.seed);
-
-    let mut clock = SimClock::new(&cfg);
-    let mut seeds = Rng::new(args.seed);
-    let mut stats = SimStats::default();
-    let mut seq = 0u64;
     let signal = shutdown_signal();
     tokio::pin!(signal);
-    'episodes: for episode in 0..args.episodes.unwrap_or(u32::MAX) {
-        let seed = seeds.next_u64();
-        let first = env.reset(seed).with_context(|| format!("resetting {task} with seed {seed}"))?;
-        let mut obs = observation(first, seq, &env_name, episode, clock.tick())?;
-        let (mut ret, mut disc, mut discount, mut all_expert) = (0f32, 0f32, 1f32, true);
+    'episodes: while sim.episodes_started() < args.episodes.unwrap_or(u32::MAX) {
+        let mut obs = sim.reset()?.clone();
         loop {
             camera.publish(&node, &obs).await?;
             // Wait for the command naming this observation; re-publish on timeout.
-            let cmd = loop {
+            let stepped = loop {
                 publish_clock(&obs.header.stamp).await?;
                 obs_pub.publish(obs.clone()).await?;
                 let deadline = tokio::time::Instant::now() + timeout;
@@ -230,94 +172,41 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
                         r = cmd_sub.recv_timeout(left) => r?,
                     };
                     let Some((cmd, _)) = r else { break None };
-                    if cmd.obs_seq != obs.seq {
-                        stats.wrong_seq += 1;
-                        debug!("ignoring a command for obs_seq {} (waiting for {})", cmd.obs_seq, obs.seq);
-                    } else if let Some(bad) = non_finite_fields(&cmd) {
-                        stats.rejected += 1;
-                        if stats.rejected.is_power_of_two() {
-                            warn!(
-                                "rejecting the command for obs_seq {}: non-finite {bad} ({} rejected so far)",
-                                cmd.obs_seq, stats.rejected
-                            );
-                        }
-                    } else {
-                        break Some(cmd);
+                    if let Some(step) = sim.command(cmd)? {
+                        break Some(step);
                     }
                 };
                 match got {
-                    Some(cmd) => break cmd,
+                    Some(step) => break step,
                     None => {
-                        stats.republished += 1;
+                        sim.stats.republished += 1;
                         debug!("no command for obs_seq {} within {timeout:?}; re-publishing", obs.seq);
                     }
                 }
             };
-            let action = Action::new(cmd.open_ratio, cmd.dx, cmd.dy, cmd.dz, cmd.dtheta);
-            let r = match env.step(&action) {
-                Ok(r) => r,
-                Err(SimError::Action(reason)) => {
-                    // Unreachable after the finiteness check, but bad input must never end the node.
-                    stats.rejected += 1;
-                    warn!("rejecting the command for obs_seq {}: {reason}", cmd.obs_seq);
-                    continue;
-                }
-                Err(e) => return Err(e).context("stepping the env"),
-            };
-            stats.steps += 1;
-            all_expert &= cmd.source == GripperCommand::SOURCE_EXPERT;
-            ret += r.reward;
-            disc += discount * r.reward;
-            discount *= equiarm_sac::agent::GAMMA as f32;
-            seq += 1;
-            let steps = r.observation.step;
-            let next = observation(r.observation, seq, &env_name, episode, clock.tick())?;
-            let ended_by_task = r.info.success || r.info.invalid;
-            let expert = cmd.source == GripperCommand::SOURCE_EXPERT;
-            let transition = Transition {
-                header: next.header.clone(),
-                obs,
-                action: cmd,
-                reward: r.reward,
-                next_obs: next.clone(),
-                done: ended_by_task,
-                timeout: r.info.timeout && !ended_by_task,
-                expert,
-            };
+            let Step { transition, result } = stepped;
+            obs = transition.next_obs.clone();
             transition_pub.publish(transition).await?;
-            obs = next;
-            if r.done {
+            if let Some(result) = result {
                 publish_clock(&obs.header.stamp).await?;
                 camera.publish(&node, &obs).await?;
-                let result = EpisodeResult {
-                    header: obs.header.clone(),
-                    env: env_name.clone(),
-                    task: task.to_string(),
-                    seed,
-                    episode,
-                    steps,
-                    success: r.info.success,
-                    ret,
-                    discounted_return: disc,
-                    expert: all_expert,
-                    eval: args.eval,
-                };
                 info!(
-                    "{}: episode {episode} (seed {seed}) ended after {steps} steps, success {}",
+                    "{}: episode {} (seed {}) ended after {} steps, success {}",
                     node.name(),
-                    r.info.success
+                    result.episode,
+                    result.seed,
+                    result.steps,
+                    result.success
                 );
                 episode_pub.publish(result).await?;
-                stats.episodes += 1;
-                seq += 1;
                 continue 'episodes;
             }
         }
     }
-    info!("{}: {stats:?}", node.name());
+    info!("{}: {:?}", node.name(), sim.stats);
     // Give reliable readers a moment to acknowledge the last samples before the writers go away.
     tokio::time::sleep(Duration::from_millis(200)).await;
-    Ok(stats)
+    Ok(sim.stats)
 }
 
 /// The camera topics. Images are copied out of the Observation only while someone subscribes.
@@ -362,41 +251,6 @@ impl CameraPublishers {
     }
 }
 
-/// The Observation message of a library observation. Colour moves into its message; depth is
-/// encoded once as little-endian float32.
-fn observation(
-    o: equiarm_sim::Observation,
-    seq: u64,
-    env: &str,
-    episode: u32,
-    stamp: Time,
-) -> anyhow::Result<Observation> {
-    let (h, w) = (o.height as u32, o.width as u32);
-    let cam_header = Header::new(stamp.clone(), CAMERA_FRAME);
-    let header = Header::new(stamp, WORLD_FRAME);
-    let a = o.expert_action;
-    Ok(Observation {
-        seq,
-        env: env.to_string(),
-        episode,
-        step: o.step,
-        color: Image::rgb8(cam_header.clone(), h, w, o.color).context("colour image")?,
-        depth: Image::float32(cam_header, h, w, &o.depth).context("depth image")?,
-        holding: o.holding,
-        expert_action: GripperCommand {
-            header: header.clone(),
-            obs_seq: seq,
-            open_ratio: a.open_ratio,
-            dx: a.dx,
-            dy: a.dy,
-            dz: a.dz,
-            dtheta: a.dtheta,
-            source: GripperCommand::SOURCE_EXPERT,
-        },
-        header,
-    })
-}
-
 /// `equiarm sim snapshot`: writes the colour, depth and segmentation PNGs of `task` after a reset with
 /// `seed` and `steps` expert steps into `out`; returns the paths written.
 pub fn snapshot(
@@ -439,16 +293,5 @@ mod tests {
         assert!(e.contains("'stacking'") && e.contains("block_in_bowl"), "{e}");
         let e = env_config(&args(&["--view", "top"])).unwrap_err().to_string();
         assert!(e.contains("angle90"), "{e}");
-    }
-
-    #[test]
-    fn non_finite_commands_name_their_fields_and_the_clock_ticks_in_sim_time() {
-        let c = GripperCommand { dy: f32::NAN, dtheta: f32::NEG_INFINITY, ..Default::default() };
-        assert_eq!(non_finite_fields(&c).unwrap(), "dy=NaN, dtheta=-inf");
-        assert_eq!(non_finite_fields(&GripperCommand::default()), None);
-        let mut clock = SimClock::new(&EnvConfig::default());
-        assert_eq!(clock.tick().as_nanos(), 0);
-        assert_eq!(clock.tick().as_nanos(), clock.step_ns);
-        assert!((clock.step_ns - 166_666_667).abs() < 100, "1/6 s up to f32 dt: {}", clock.step_ns);
     }
 }

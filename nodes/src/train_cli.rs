@@ -6,15 +6,15 @@
 //! shows the result without running.
 
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{Context as _, bail};
 use equiarm_nn::burn::tensor::Device;
 use equiarm_sac::agent::ModelKind;
-use equiarm_sac::config::{Augmentation, TrainConfig};
+use equiarm_sac::config::{Augmentation, Preset, TrainConfig};
 use equiarm_train::inprocess::RunOptions;
 use equiarm_train::record::RunSummary;
+
+use crate::signals::stop_flag;
 
 /// Options of `equiarm train`.
 #[derive(Clone, Debug, clap::Args)]
@@ -25,8 +25,8 @@ pub struct TrainArgs {
     /// Preset: `reduced16` (38 → 32 px frames, hidden 16, 1.5× the paper's update count: about
     /// 45 min of training on 2 cores), `reduced` (the same frames at hidden 8 and a quarter of the
     /// paper's updates: fast, learns little) or `paper` (docs/paper.md §2; meant for a GPU).
-    #[arg(long, default_value = TrainConfig::DEFAULT_PRESET)]
-    pub preset: String,
+    #[arg(long, value_enum, default_value_t = Preset::DEFAULT)]
+    pub preset: Preset,
     /// JSON config file (replaces the preset; flags below still override it).
     #[arg(long)]
     pub config: Option<PathBuf>,
@@ -137,8 +137,7 @@ impl TrainArgs {
                     std::fs::read_to_string(path).with_context(|| format!("reading config {}", path.display()))?;
                 TrainConfig::from_json(&text).map_err(|e| anyhow::anyhow!("config {}: {e}", path.display()))?
             }
-            None => TrainConfig::preset(&self.preset, &task)
-                .ok_or_else(|| anyhow::anyhow!("unknown --preset `{}`: use {}", self.preset, TrainConfig::PRESETS))?,
+            None => TrainConfig::preset(self.preset, &task),
         };
         if let Some(t) = &self.task
             && (self.config.is_some() || t != &cfg.task)
@@ -201,59 +200,7 @@ pub fn run_in_process(args: &TrainArgs, cfg: TrainConfig) -> anyhow::Result<RunS
         device: args.device.clone(),
         force: args.force,
     };
-    let flag = stop.clone();
-    let summary = equiarm_train::inprocess::run(cfg, &opts, &move || flag.load(Ordering::Relaxed))?;
-    Ok(summary)
-}
-
-/// Print the evaluation table of a run (one row per evaluation) and where its outputs are.
-pub fn print_summary(s: &RunSummary) {
-    println!("\n  updates   episodes   success rate   discounted return   mean length");
-    for e in &s.evals {
-        println!(
-            "  {:>7}   {:>8}   {:>12.2}   {:>17.3}   {:>11.1}",
-            e.updates, e.episodes, e.success_rate, e.discounted_return, e.mean_length
-        );
-    }
-    println!("\nrun directory   {}", s.run_dir.display());
-    println!("metrics         {}", s.run_dir.join("metrics.csv").display());
-    println!("learning curve  {}", s.run_dir.join("learning_curve.png").display());
-    if let Some(c) = &s.last_checkpoint {
-        println!("checkpoint      {}", c.display());
-    }
-    println!("updates {}, env steps {}, wall {:.0} s", s.updates, s.global_step, s.wall_s);
-}
-
-/// A flag that turns true on SIGINT or SIGTERM (a helper thread waits for the signal).
-pub fn stop_flag() -> Arc<AtomicBool> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let rt = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
-            Ok(rt) => rt,
-            Err(e) => {
-                log::warn!("no signal handler: {e}");
-                return;
-            }
-        };
-        rt.block_on(async {
-            // The first poll installs the handlers; only then is the flag armed.
-            let signal = crate::ros::shutdown_signal();
-            tokio::pin!(signal);
-            if let std::task::Poll::Ready(r) = futures::poll!(&mut signal) {
-                log::warn!("no SIGINT/SIGTERM handler: {r:?}");
-                return;
-            }
-            let _ = tx.send(());
-            if let Ok(sig) = signal.await {
-                log::info!("{sig}: stopping after the current step and writing a checkpoint");
-                flag.store(true, Ordering::Relaxed);
-            }
-        });
-    });
-    let _ = rx.recv_timeout(std::time::Duration::from_secs(1));
-    stop
+    Ok(equiarm_train::inprocess::run(cfg, &opts, &move || stop.load(std::sync::atomic::Ordering::Relaxed))?)
 }
 
 #[cfg(test)]

@@ -24,7 +24,8 @@ use log::{info, warn};
 use tokio::task::JoinHandle;
 
 use crate::ros::{Publisher, RosNode, RosOptions, Subscriber, qos};
-use crate::train_cli::{TrainArgs, stop_flag};
+use crate::signals::stop_flag;
+use crate::train_cli::TrainArgs;
 
 type Update = JoinHandle<(Learner, Result<Metrics, LearnerError>)>;
 

@@ -212,7 +212,10 @@ fn main() {
         .collect();
     for preset_name in &presets {
         for &model in &models {
-            let preset = TrainConfig::preset(preset_name, "block_pulling").expect("preset");
+            let preset = TrainConfig::preset(
+                equiarm_sac::config::Preset::from_name(preset_name).expect("preset"),
+                "block_pulling",
+            );
             // SEN's paper hidden size is 32 (docs/paper.md §1.9).
             let hidden = if model == ModelKind::Sen && *preset_name == "paper" { 32 } else { preset.agent.hidden };
             let hidden = args.hidden.unwrap_or(hidden);

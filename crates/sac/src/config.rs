@@ -52,6 +52,42 @@ pub const MAX_ENVS: usize = 256;
 /// Largest number of evaluation or demonstration episodes accepted (the paper: 100 at most).
 pub const MAX_EPISODES: usize = 100_000;
 
+/// The named configurations of [`TrainConfig`] (with the `clap` feature, a `clap::ValueEnum`: the
+/// command line's `--preset`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum Preset {
+    /// [`TrainConfig::reduced`].
+    Reduced,
+    /// [`TrainConfig::reduced16`].
+    Reduced16,
+    /// [`TrainConfig::paper`].
+    Paper,
+}
+
+impl Preset {
+    /// Every preset.
+    pub const ALL: [Preset; 3] = [Preset::Reduced, Preset::Reduced16, Preset::Paper];
+
+    /// The preset `equiarm train`, the launch scripts and a policy without a manifest use when none
+    /// is named: the CPU config at which Equi SAC reaches the paper's block-pulling result.
+    pub const DEFAULT: Preset = Preset::Reduced16;
+
+    /// Its name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::Reduced => "reduced",
+            Preset::Reduced16 => "reduced16",
+            Preset::Paper => "paper",
+        }
+    }
+
+    /// A preset by name.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|p| p.name() == name)
+    }
+}
+
 /// Everything that defines a training run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -165,7 +201,7 @@ impl TrainConfig {
     /// The annealing lifts the same seeds to 86 and 91 of 100 at 5,000 updates. The figures per seed
     /// and the run times are in `docs/experiments/learning.md`. An Equi update takes about 0.45 s at one thread and
     /// 0.23 s at two on the default build (about 50 min of training for a run over DDS on 2 cores). The
-    /// default preset ([`TrainConfig::DEFAULT_PRESET`]), the main job's. Only block pulling has
+    /// default preset ([`Preset::DEFAULT`]), the main job's. Only block pulling has
     /// been run at this preset.
     pub fn reduced16(task: &str) -> Self {
         let paper = TrainConfig::paper(task);
@@ -177,20 +213,12 @@ impl TrainConfig {
         }
     }
 
-    /// The preset `equiarm train`, the launch scripts and a policy without a manifest use when none
-    /// is named: the CPU config at which Equi SAC reaches the paper's block-pulling result.
-    pub const DEFAULT_PRESET: &'static str = "reduced16";
-
-    /// The preset names [`TrainConfig::preset`] knows, for help texts and errors.
-    pub const PRESETS: &'static str = "reduced, reduced16 or paper";
-
-    /// A preset by name: `reduced`, `reduced16` or `paper`.
-    pub fn preset(name: &str, task: &str) -> Option<Self> {
-        match name {
-            "paper" => Some(TrainConfig::paper(task)),
-            "reduced" => Some(TrainConfig::reduced(task)),
-            "reduced16" => Some(TrainConfig::reduced16(task)),
-            _ => None,
+    /// A preset for `task`.
+    pub fn preset(preset: Preset, task: &str) -> Self {
+        match preset {
+            Preset::Paper => TrainConfig::paper(task),
+            Preset::Reduced => TrainConfig::reduced(task),
+            Preset::Reduced16 => TrainConfig::reduced16(task),
         }
     }
 
@@ -314,12 +342,10 @@ mod tests {
             ..r16
         };
         assert_eq!(back, r);
-        for name in ["reduced", "reduced16", "paper"] {
-            assert!(
-                TrainConfig::preset(name, "block_pulling").is_some() && TrainConfig::PRESETS.contains(name),
-                "{name}"
-            );
+        for p in Preset::ALL {
+            assert_eq!(Preset::from_name(p.name()), Some(p));
         }
+        assert_eq!(TrainConfig::preset(Preset::DEFAULT, "block_pulling"), TrainConfig::reduced16("block_pulling"));
     }
 
     #[test]

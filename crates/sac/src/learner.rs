@@ -1,5 +1,5 @@
 //! The learner: agent + prioritised replay + crops + checkpoints, fed transitions by whoever runs
-//! the environments (the in-process loop of [`crate::train`] or the DDS trainer node).
+//! the environments (the in-process loop of `equiarm_train` or the DDS trainer node).
 //!
 //! A checkpoint is a directory with the agent's files (see [`crate::agent::Sac::save`]),
 //! `replay.bin.zst`, `learner.json` (counters and RNG position) and `manifest.json` (config,

@@ -34,8 +34,8 @@ mod tests {
     #[test]
     fn every_preset_of_every_task_passes() {
         for task in TaskKind::ALL {
-            for name in ["reduced", "reduced16", "paper"] {
-                check(&TrainConfig::preset(name, task.name()).unwrap()).unwrap();
+            for p in equiarm_sac::config::Preset::ALL {
+                check(&TrainConfig::preset(p, task.name())).unwrap();
             }
         }
     }

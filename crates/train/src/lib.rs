@@ -1,7 +1,7 @@
 //! equiarm_train: a training run around the learner ([`equiarm_sac`]), with no ROS in it.
 //!
 //! - [`inprocess`]: the transport-free training loop (`equiarm train --in-process`).
-//! - [`env`]: the simulator side: env configs, episode seeds, frames, expert demonstrations.
+//! - [`env`](mod@env): the simulator side: env configs, episode seeds, frames, expert demonstrations.
 //! - [`evaluation`]: greedy evaluations, in-process or from published episode results.
 //! - [`record`], [`rundir`]: what a run writes (config, metrics, evaluations, checkpoints) and its
 //!   directory's layout and lock.
@@ -13,6 +13,7 @@
 //! - [`trainer`], [`ingest`], [`lockstep`]: the trainer node's decisions, its intake of transitions and episode results, and
 //!   its deterministic rounds.
 //! - [`policy`], [`gate`]: the policy node's acting and when it answers.
+//! - [`stepper`]: the sim node's env, stepped by commands, as messages.
 //! - [`policy_eval`], [`bag_report`]: an actor replayed on a recorded bag; `bag info` and
 //!   `bag eval` texts.
 
@@ -36,6 +37,7 @@ pub mod policy_eval;
 pub mod progress;
 pub mod record;
 pub mod rundir;
+pub mod stepper;
 pub mod trainer;
 
 /// Errors of a training run.

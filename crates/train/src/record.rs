@@ -33,6 +33,27 @@ pub struct RunSummary {
     pub demos: (usize, usize),
 }
 
+/// The evaluation table of a run (one row per evaluation) and where its outputs are.
+impl std::fmt::Display for RunSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(f, "\n  updates   episodes   success rate   discounted return   mean length")?;
+        for e in &self.evals {
+            writeln!(
+                f,
+                "  {:>7}   {:>8}   {:>12.2}   {:>17.3}   {:>11.1}",
+                e.updates, e.episodes, e.success_rate, e.discounted_return, e.mean_length
+            )?;
+        }
+        writeln!(f, "\nrun directory   {}", self.run_dir.display())?;
+        writeln!(f, "metrics         {}", self.run_dir.join(crate::metrics::CSV_FILE).display())?;
+        writeln!(f, "learning curve  {}", self.run_dir.join("learning_curve.png").display())?;
+        if let Some(c) = &self.last_checkpoint {
+            writeln!(f, "checkpoint      {}", c.display())?;
+        }
+        write!(f, "updates {}, env steps {}, wall {:.0} s", self.updates, self.global_step, self.wall_s)
+    }
+}
+
 /// A run's directory while the run lives: claimed ([`RunDirLock`]) and written to.
 #[derive(Debug)]
 pub struct RunRecord {

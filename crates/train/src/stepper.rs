@@ -1,0 +1,306 @@
+//! The sim node's logic without DDS: an env stepped by `GripperCommand`s, as messages. Each
+//! observation becomes an `Observation` (seq, env, episode, step, rgb8 colour, 32FC1 depth in
+//! metres, holding, the expert's action with `source = EXPERT` and `obs_seq = seq`); each step a
+//! `Transition`; each episode's end an `EpisodeResult`.
+//!
+//! `seq` counts the observations this env made, from 0. The terminal observation of an episode is
+//! only the `next_obs` of its last Transition: nothing answers it, so the `observation` topic skips
+//! that one seq at each episode boundary.
+//!
+//! Stamps come from a simulated clock: one tick of [`SimClock::step_ns`] (the physics time of one env
+//! step, `dt * substeps`) per observation made, from 0; wall time is never read.
+
+use equiarm_msgs::builtin_interfaces::Time;
+use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, Transition};
+use equiarm_msgs::sensor_msgs::Image;
+use equiarm_msgs::std_msgs::Header;
+use equiarm_sim::{Env, EnvConfig, SimError, rng::Rng};
+
+use crate::policy::action_of;
+
+/// Frame of observations, transitions and commands.
+pub const WORLD_FRAME: &str = "world";
+/// Frame of the camera images and `CameraInfo` (optical convention: z forward, x right, y down).
+pub const CAMERA_FRAME: &str = "camera_optical_frame";
+
+/// Why the stepper stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum StepError {
+    /// The simulator failed (resetting or stepping).
+    #[error("{what}: {source}")]
+    Sim {
+        /// What was being done.
+        what: String,
+        /// The simulator's error.
+        source: SimError,
+    },
+    /// An image did not fit its message.
+    #[error("{what} image: {source}")]
+    Image {
+        /// Colour or depth.
+        what: &'static str,
+        /// The message's error.
+        source: equiarm_msgs::ImageError,
+    },
+}
+
+/// Simulated time: `ticks * step_ns` nanoseconds.
+#[derive(Clone, Copy, Debug)]
+pub struct SimClock {
+    /// Simulated time of one env step, ns: `dt * substeps` of the physics settings, rounded.
+    pub step_ns: i64,
+    /// Ticks taken so far (one per observation made); the next stamp is `ticks * step_ns`.
+    pub ticks: i64,
+}
+
+impl SimClock {
+    /// A clock at time 0 whose tick is one env step of `cfg`'s physics (`dt * substeps` seconds).
+    pub fn new(cfg: &EnvConfig) -> Self {
+        let step_s = cfg.params.dt as f64 * cfg.params.substeps as f64;
+        Self { step_ns: (step_s * 1e9).round() as i64, ticks: 0 }
+    }
+
+    /// The stamp of the next frame; advances the clock.
+    pub fn tick(&mut self) -> Time {
+        let t = Time::from_nanos(self.ticks.saturating_mul(self.step_ns));
+        self.ticks += 1;
+        t
+    }
+}
+
+/// What a run did (also logged at shutdown).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SimStats {
+    /// Env steps taken (commands applied).
+    pub steps: u64,
+    /// Episodes that ended (and had their `EpisodeResult` published).
+    pub episodes: u64,
+    /// Times an Observation was published again because no command for it came within the timeout.
+    pub republished: u64,
+    /// Commands ignored because their `obs_seq` was not that of the Observation waited on.
+    pub wrong_seq: u64,
+    /// Commands for the awaited Observation rejected because a field was NaN or infinite.
+    pub rejected: u64,
+}
+
+/// The names of the non-finite fields of a command, e.g. `dx=NaN, dtheta=inf`; None if all are finite.
+pub fn non_finite_fields(c: &GripperCommand) -> Option<String> {
+    let fields = [("open_ratio", c.open_ratio), ("dx", c.dx), ("dy", c.dy), ("dz", c.dz), ("dtheta", c.dtheta)];
+    let bad: Vec<String> = fields.iter().filter(|(_, v)| !v.is_finite()).map(|(n, v)| format!("{n}={v}")).collect();
+    (!bad.is_empty()).then(|| bad.join(", "))
+}
+
+/// A step the env took: the Transition to publish and, when the episode ended, its EpisodeResult
+/// ([`Stepper::reset`] then starts the next).
+#[derive(Debug)]
+pub struct Step {
+    /// The transition.
+    pub transition: Transition,
+    /// The episode's result, when it ended.
+    pub result: Option<EpisodeResult>,
+}
+
+/// One env, its episodes and its messages.
+pub struct Stepper {
+    env: Env,
+    name: String,
+    eval: bool,
+    seeds: Rng,
+    clock: SimClock,
+    seq: u64,
+    episode: u32,
+    next_episode: u32,
+    seed: u64,
+    /// The observation waiting for its command.
+    obs: Option<Observation>,
+    ret: f32,
+    disc: f32,
+    discount: f32,
+    all_expert: bool,
+    /// Counts so far.
+    pub stats: SimStats,
+}
+
+impl Stepper {
+    /// The env `name` of `cfg`, its episodes seeded from `seed` (episode k is reset with the k-th output
+    /// of `Rng::new(seed)`); `eval` marks its EpisodeResults.
+    pub fn new(cfg: EnvConfig, name: &str, seed: u64, eval: bool) -> Result<Self, SimError> {
+        Ok(Stepper {
+            clock: SimClock::new(&cfg),
+            env: Env::new(cfg)?,
+            name: name.to_string(),
+            eval,
+            seeds: Rng::new(seed),
+            seq: 0,
+            episode: 0,
+            next_episode: 0,
+            seed: 0,
+            obs: None,
+            ret: 0.0,
+            disc: 0.0,
+            discount: 1.0,
+            all_expert: true,
+            stats: SimStats::default(),
+        })
+    }
+
+    /// The env.
+    pub fn env(&self) -> &Env {
+        &self.env
+    }
+
+    /// Episodes started so far.
+    pub fn episodes_started(&self) -> u32 {
+        self.next_episode
+    }
+
+    /// Start the next episode; its first observation.
+    pub fn reset(&mut self) -> Result<&Observation, StepError> {
+        self.episode = self.next_episode;
+        self.next_episode += 1;
+        self.seed = self.seeds.next_u64();
+        let task = self.env.config().task.name();
+        let first = self
+            .env
+            .reset(self.seed)
+            .map_err(|source| StepError::Sim { what: format!("resetting {task} with seed {}", self.seed), source })?;
+        let obs = observation(first, self.seq, &self.name, self.episode, self.clock.tick())?;
+        (self.ret, self.disc, self.discount, self.all_expert) = (0.0, 0.0, 1.0, true);
+        Ok(self.obs.insert(obs))
+    }
+
+    /// The observation waiting for its command.
+    pub fn observation(&self) -> Option<&Observation> {
+        self.obs.as_ref()
+    }
+
+    /// Apply `cmd` if it answers the waiting observation and is finite (out-of-range values are
+    /// clipped by the simulator). `None`: not for the observation waited on, or with a non-finite
+    /// field: counted, the wait goes on.
+    pub fn command(&mut self, cmd: GripperCommand) -> Result<Option<Step>, StepError> {
+        let Some(obs) = self.obs.as_ref() else { return Ok(None) };
+        if cmd.obs_seq != obs.seq {
+            self.stats.wrong_seq += 1;
+            log::debug!("ignoring a command for obs_seq {} (waiting for {})", cmd.obs_seq, obs.seq);
+            return Ok(None);
+        }
+        if let Some(bad) = non_finite_fields(&cmd) {
+            self.reject(&cmd, &format!("non-finite {bad}"));
+            return Ok(None);
+        }
+        let r = match self.env.step(&action_of(&cmd)) {
+            Ok(r) => r,
+            // Unreachable after the finiteness check, but bad input must never end the node.
+            Err(SimError::Action(reason)) => {
+                self.reject(&cmd, &reason.to_string());
+                return Ok(None);
+            }
+            Err(source) => return Err(StepError::Sim { what: "stepping the env".into(), source }),
+        };
+        let obs = self.obs.take().expect("checked");
+        self.stats.steps += 1;
+        let expert = cmd.source == GripperCommand::SOURCE_EXPERT;
+        self.all_expert &= expert;
+        self.ret += r.reward;
+        self.disc += self.discount * r.reward;
+        self.discount *= equiarm_sac::agent::GAMMA as f32;
+        self.seq += 1;
+        let steps = r.observation.step;
+        let next = observation(r.observation, self.seq, &self.name, self.episode, self.clock.tick())?;
+        let ended_by_task = r.info.success || r.info.invalid;
+        let transition = Transition {
+            header: next.header.clone(),
+            obs,
+            action: cmd,
+            reward: r.reward,
+            next_obs: next.clone(),
+            done: ended_by_task,
+            timeout: r.info.timeout && !ended_by_task,
+            expert,
+        };
+        if !r.done {
+            self.obs = Some(next);
+            return Ok(Some(Step { transition, result: None }));
+        }
+        let result = EpisodeResult {
+            header: next.header.clone(),
+            env: self.name.clone(),
+            task: self.env.config().task.name().to_string(),
+            seed: self.seed,
+            episode: self.episode,
+            steps,
+            success: r.info.success,
+            ret: self.ret,
+            discounted_return: self.disc,
+            expert: self.all_expert,
+            eval: self.eval,
+        };
+        self.stats.episodes += 1;
+        self.seq += 1;
+        Ok(Some(Step { transition, result: Some(result) }))
+    }
+
+    fn reject(&mut self, cmd: &GripperCommand, why: &str) {
+        self.stats.rejected += 1;
+        if self.stats.rejected.is_power_of_two() {
+            log::warn!(
+                "rejecting the command for obs_seq {}: {why} ({} rejected so far)",
+                cmd.obs_seq,
+                self.stats.rejected
+            );
+        }
+    }
+}
+
+/// The Observation message of a library observation. Colour moves into its message; depth is
+/// encoded once as little-endian float32.
+pub fn observation(
+    o: equiarm_sim::Observation,
+    seq: u64,
+    env: &str,
+    episode: u32,
+    stamp: Time,
+) -> Result<Observation, StepError> {
+    let (h, w) = (o.height as u32, o.width as u32);
+    let cam_header = Header::new(stamp.clone(), CAMERA_FRAME);
+    let header = Header::new(stamp, WORLD_FRAME);
+    let a = o.expert_action;
+    Ok(Observation {
+        seq,
+        env: env.to_string(),
+        episode,
+        step: o.step,
+        color: Image::rgb8(cam_header.clone(), h, w, o.color)
+            .map_err(|source| StepError::Image { what: "colour", source })?,
+        depth: Image::float32(cam_header, h, w, &o.depth)
+            .map_err(|source| StepError::Image { what: "depth", source })?,
+        holding: o.holding,
+        expert_action: GripperCommand {
+            header: header.clone(),
+            obs_seq: seq,
+            open_ratio: a.open_ratio,
+            dx: a.dx,
+            dy: a.dy,
+            dz: a.dz,
+            dtheta: a.dtheta,
+            source: GripperCommand::SOURCE_EXPERT,
+        },
+        header,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn non_finite_commands_name_their_fields_and_the_clock_ticks_in_sim_time() {
+        let c = GripperCommand { dy: f32::NAN, dtheta: f32::NEG_INFINITY, ..Default::default() };
+        assert_eq!(non_finite_fields(&c).unwrap(), "dy=NaN, dtheta=-inf");
+        assert_eq!(non_finite_fields(&GripperCommand::default()), None);
+        let mut clock = SimClock::new(&EnvConfig::default());
+        assert_eq!(clock.tick().as_nanos(), 0);
+        assert_eq!(clock.tick().as_nanos(), clock.step_ns);
+        assert!((clock.step_ns - 166_666_667).abs() < 100, "1/6 s up to f32 dt: {}", clock.step_ns);
+    }
+}
