@@ -25,7 +25,7 @@ while [ $# -gt 0 ]; do
   esac
 done
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/equiarm/target}"
-cargo build --locked --quiet --bin equiarm --example compare_runs -p equiarm -p equiarm_sac ${features:+--features "equiarm/$features"}
+cargo build --locked --quiet --bin equiarm --example compare_runs -p equiarm -p equiarm_train ${features:+--features "equiarm/$features"}
 bin=$CARGO_TARGET_DIR/debug/equiarm
 mkdir -p "$out"
 threads=$(( 2 / parallel )); [ "$threads" -lt 1 ] && threads=1

@@ -11,10 +11,11 @@
 //!
 //! NOTE: RustDDS 0.15 keeps acked samples of a reliable writer until its cache-cleaning timer, which
 //! runs every 6 s (`rtps/writer.rs`, not configurable), so up to ~12 s of samples are
-//! held. The node's peak RSS is therefore about 22 MB + 12 s × steps/s × 0.49 MB (one Observation on
-//! `observation` and two inside the Transition, 152 px RGBD): measured (debug profile, 2 shared cores)
-//! 139 MB at 21 steps/s, 183 MB at 35 steps/s, 257 MB after 500 and 399 MB after 1000 unthrottled
-//! steps (~130 steps/s). The 150 MB budget of docs/architecture.md#memory-budget holds up to ~20 steps/s.
+//! held. The node's peak RSS is therefore about 22 MB + 12 s × steps/s × the bytes it publishes per
+//! step. Until message schema 2 that was 0.49 MB at 152 px (one Observation on `observation` and two
+//! inside the Transition): 139 MB at 21 steps/s, 183 MB at 35, 257 MB after 500 unthrottled steps.
+//! Since schema 2 a Transition names its observations by seq (0.16 MB per step at 152 px); the bench
+//! prints the payload bytes per step it received, per topic.
 //! `--camera` also subscribes to the camera topics (the node copies images only while someone does).
 //! Run it where DDS multicast works (e.g. inside `unshare -n` with loopback multicast, as the tests do).
 
@@ -22,6 +23,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use clap::Parser;
+use equiarm_msgs::cdr;
 use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, Transition};
 use equiarm_msgs::sensor_msgs::Image;
 use equiarm_nodes::ros::{RosNode, RosOptions, qos};
@@ -78,19 +80,30 @@ fn main() -> anyhow::Result<()> {
             .spawn()?;
         let pid = child.id();
         let (mut done, mut episodes, mut successes, mut frames) = (0u64, 0u64, 0u64, 0u64);
+        // Payload bytes received per topic (every publication, re-publications included).
+        let (mut obs_bytes, mut tr_bytes, mut ep_bytes) = (0usize, 0usize, 0usize);
         let mut start = None;
         let deadline = Instant::now() + Duration::from_secs(600);
         while done < steps && Instant::now() < deadline {
             tokio::select! {
                 Ok(Some((o, _))) = obs_sub.recv_timeout(Duration::from_millis(50)) => {
+                    obs_bytes += cdr::encode(&o)?.len();
+                    // An episode's terminal frame is for the trainer and the recorder: no answer.
+                    if o.terminal {
+                        continue;
+                    }
                     start.get_or_insert_with(Instant::now);
                     if delay_ms > 0 {
                         tokio::time::sleep(Duration::from_millis(delay_ms)).await;
                     }
                     cmd_pub.publish(GripperCommand { obs_seq: o.seq, ..o.expert_action }).await?;
                 }
-                Ok(Some(_)) = tr_sub.recv_timeout(Duration::from_millis(50)) => done += 1,
+                Ok(Some((t, _))) = tr_sub.recv_timeout(Duration::from_millis(50)) => {
+                    tr_bytes += cdr::encode(&t)?.len();
+                    done += 1;
+                }
                 Ok(Some((r, _))) = ep_sub.recv_timeout(Duration::from_millis(50)) => {
+                    ep_bytes += cdr::encode(&r)?.len();
                     episodes += 1;
                     successes += r.success as u64;
                 }
@@ -105,6 +118,14 @@ fn main() -> anyhow::Result<()> {
         let _ = child.wait();
         println!("task {task}: {done} steps in {secs:.2} s = {:.1} steps/s (lock-step over DDS, expert driver)", done as f64 / secs);
         println!("episodes {episodes}, successes {successes}, camera frames received {frames}");
+        let per = |b: usize| b as f64 / done.max(1) as f64 / 1e3;
+        println!(
+            "payload per env step and reader: observation {:.1} kB, transitions {:.2} kB, episodes {:.3} kB, total {:.1} kB",
+            per(obs_bytes),
+            per(tr_bytes),
+            per(ep_bytes),
+            per(obs_bytes + tr_bytes + ep_bytes)
+        );
         println!(
             "sim node peak RSS (VmHWM) {:.1} MB, RSS at end {:.1} MB (budget 150 MB)",
             hwm.unwrap_or(0) as f64 / 1024.0,

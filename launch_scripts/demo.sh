@@ -45,7 +45,9 @@ resolution=${resolution:-$(eqa_config_get "$config" image_size)}
 out=${out:-runs/demo-$task-$(date +%Y%m%d-%H%M%S)}
 
 eqa_bin
-eqa_recorded_run "$out"
+obs_topics=()
+for ((k = 0; k < num_envs; k++)); do obs_topics+=("/env$k/observation:equiarm_msgs/msg/Observation"); done
+eqa_recorded_run "$out" "${obs_topics[@]}"
 bag=$EQA_BAG
 sims=()
 for ((k = 0; k < num_envs; k++)); do

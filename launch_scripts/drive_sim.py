@@ -2,9 +2,13 @@
 """Drives ONE `equiarm sim` node by hand, with a scripted action instead of a policy node.
 
 Subscribes `/<ns>/observation`, answers each Observation with a GripperCommand naming its seq on
-`/<ns>/gripper_cmd`, prints one line per step (seq, step, holding, the action, and the reward and
-done flags from the Transition on `/transitions`) and one line per episode (the EpisodeResult from
-`/episodes`), and stops after `--episodes N`.
+`/<ns>/gripper_cmd` (except an episode's last frame, `terminal`, which no command answers), prints
+one line per step (from the Transition on `/transitions` of this env: its obs_seq, episode, step, the
+action, the reward and the done/timeout flags, plus the holding flag of the Observation it names) and
+one line per episode (the EpisodeResult from `/episodes`), and stops after `--episodes N`.
+
+A Transition carries no images: it names its two Observations by `obs_seq` / `next_obs_seq` (same
+env); launch_scripts/bag_transitions.py shows how to join them again from a bag.
 
 Actions: by default the expert action the sim puts into every Observation (`source = EXPERT`);
 `--random` draws uniformly in the sim's action ranges (dx, dy, dz in +-0.05 m, dtheta in +-pi/4,
@@ -73,6 +77,8 @@ class Driver:
         self.make_command = make_command  # (obs_seq, open, dx, dy, dz, dtheta, source) -> message
         self.rng = random.Random(args.seed)
         self.answered = {}  # seq -> command sent (re-sent when the sim re-publishes the observation)
+        self.holding = {}  # seq -> holding flag of the answered Observations no Transition named yet
+        self.last_obs_seq = -1  # obs_seq of the latest Transition of this env
         self.episodes = []
         self.steps = 0
 
@@ -84,8 +90,12 @@ class Driver:
 
     def on_observation(self, obs):
         """The command that answers `obs` (the same one again for a re-published observation)."""
-        if obs.env != self.env:
-            return None
+        if obs.env != self.env or obs.terminal:
+            return None  # another env's, or an episode's last frame: nothing answers it
+        if obs.seq > self.last_obs_seq:
+            self.holding[obs.seq] = bool(obs.holding)
+            while len(self.holding) > 256:  # bounded, should Transitions not arrive
+                del self.holding[min(self.holding)]
         cmd = self.answered.get(obs.seq)
         if cmd is None:
             if self.args.random:
@@ -99,17 +109,25 @@ class Driver:
         return cmd
 
     def on_transition(self, t):
-        if t.obs.env != self.env or self.args.quiet_steps:
+        """One step line. The Transition names its observations by seq; the holding flag comes from the
+        Observation `obs_seq`, which this driver answered before the step could happen (None if not)."""
+        if t.env != self.env:
+            return
+        holding = self.holding.pop(t.obs_seq, None)
+        self.last_obs_seq = max(self.last_obs_seq, t.obs_seq)
+        for seq in [s for s in self.holding if s < t.obs_seq]:
+            del self.holding[seq]
+        if self.args.quiet_steps:
             return
         self.steps += 1
         a = t.action
-        self.emit(f"{self.env} seq {t.obs.seq:5d}  episode {t.obs.episode:3d}  step {t.obs.step:3d}  "
-                  f"holding {int(t.obs.holding)}  action open {a.open_ratio:.2f} dx {a.dx:+.3f} dy {a.dy:+.3f} "
-                  f"dz {a.dz:+.3f} dth {a.dtheta:+.3f}  reward {t.reward:.1f}"
+        self.emit(f"{self.env} seq {t.obs_seq:5d}  episode {t.episode:3d}  step {t.step:3d}  "
+                  f"holding {'?' if holding is None else int(holding)}  action open {a.open_ratio:.2f} "
+                  f"dx {a.dx:+.3f} dy {a.dy:+.3f} dz {a.dz:+.3f} dth {a.dtheta:+.3f}  reward {t.reward:.1f}"
                   f"{'  done' if t.done else ''}{'  timeout' if t.timeout else ''}",
-                  event="step", env=self.env, seq=t.obs.seq, episode=t.obs.episode, step=t.obs.step,
-                  holding=bool(t.obs.holding), reward=float(t.reward), done=bool(t.done),
-                  timeout=bool(t.timeout), expert=bool(t.expert), source=int(a.source))
+                  event="step", env=self.env, seq=int(t.obs_seq), next_seq=int(t.next_obs_seq),
+                  episode=int(t.episode), step=int(t.step), holding=holding, reward=float(t.reward),
+                  done=bool(t.done), timeout=bool(t.timeout), expert=bool(t.expert), source=int(a.source))
 
     def on_episode(self, r):
         if r.env != self.env:

@@ -74,7 +74,11 @@ def commands(args):
     image = f"{frame}:{size}"
 
     deterministic = str(args.get("deterministic", "false")).lower() in ("1", "true", "yes")
+    # by name, so they are subscribed from the start; each env's observation topic too (a Transition
+    # names its two Observations by seq: without them a bag holds no images)
     recorded = ["/episodes:equiarm_msgs/msg/EpisodeResult", "/transitions:equiarm_msgs/msg/Transition"]
+    recorded += [f"{ns}/observation:equiarm_msgs/msg/Observation" for ns in
+                 [f"/env{k}" for k in range(n)] + [EVAL_NAMESPACE]]
     cmds = [("recorder", [exe, "record", "--all", "-q", "-o", os.path.join(run_dir, "bag")] + recorded)]
     trainer = [exe, "train"]
     trainer += ["--config", args["config"]] if args.get("config") else ["--preset", preset]

@@ -55,7 +55,7 @@ model=${model:-$(eqa_config_get "$config" model)}
 out=${out:-runs/eval-$task-$(date +%Y%m%d-%H%M%S)}
 
 eqa_bin
-eqa_recorded_run "$out"
+eqa_recorded_run "$out" /eval/observation:equiarm_msgs/msg/Observation
 bag=$EQA_BAG
 eqa_start policy_eval "$out/logs/policy_eval.log" \
   "$EQUIARM_BIN" policy --namespace /eval --mode greedy --checkpoint "$checkpoint" \

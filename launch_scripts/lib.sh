@@ -151,8 +151,10 @@ eqa_on_exit() {
   return $rc
 }
 
-# eqa_recorded_run OUT: creates OUT/logs, sets EQA_BAG=OUT/bag (printed at exit), installs the exit
-# and signal traps, starts the recorder of every topic and gives it a second to join the graph.
+# eqa_recorded_run OUT [TOPIC:TYPE...]: creates OUT/logs, sets EQA_BAG=OUT/bag (printed at exit),
+# installs the exit and signal traps, starts the recorder of every topic and gives it a second to join
+# the graph. The TOPIC:TYPE arguments (the callers pass each env's `observation` topic) are subscribed
+# from the start too.
 eqa_recorded_run() {
   mkdir -p "$1/logs"
   EQA_BAG="$1/bag"
@@ -160,10 +162,12 @@ eqa_recorded_run() {
   trap eqa_on_exit EXIT
   trap 'exit 130' INT
   trap 'exit 143' TERM
-  # /episodes and /transitions by name, so they are subscribed from the start (`--all` looks for
-  # new topics every 100 ms and can miss the start of a short first episode); the rest through --all.
+  # /episodes, /transitions and the given topics (each env's observation: a Transition names its
+  # Observations by seq, so a bag without them is not self-contained) by name, so they are subscribed
+  # from the start (`--all` looks for new topics every 100 ms and can miss the start of a short first
+  # episode); the rest through --all.
   eqa_start recorder "$1/logs/record.log" "$EQUIARM_BIN" record --all -q -o "$EQA_BAG" \
-    /episodes:equiarm_msgs/msg/EpisodeResult /transitions:equiarm_msgs/msg/Transition
+    /episodes:equiarm_msgs/msg/EpisodeResult /transitions:equiarm_msgs/msg/Transition "${@:2}"
   sleep 1
 }
 

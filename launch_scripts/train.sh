@@ -69,7 +69,7 @@ bin=$EQUIARM_BIN
 
 # Never overwrite a run: a directory holding one is refused, or moved aside with --force (a
 # `-- --resume` of that run continues in it: the trainer checks that). What holds a run is the
-# trainer's list (`equiarm_sac::train::RUN_FILES`) plus the bag, which this script's recorder
+# trainer's list (`equiarm_train::rundir::RUN_FILES`) plus the bag, which this script's recorder
 # writes before the trainer starts, so the check has to happen here, before anything is written.
 held=()
 if [[ " ${extra[*]} " != *" --resume "* ]]; then
@@ -102,7 +102,9 @@ pace=(--max-lead 10) trainer_mode=()
 start() { eqa_start "$1" "$run_dir/logs/$1.log" "${@:2}"; }
 echo "== run directory $run_dir (ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in $run_dir/logs)"
 if [ $record = 1 ]; then
-  eqa_recorded_run "$run_dir"
+  obs_topics=(/eval/observation:equiarm_msgs/msg/Observation)
+  for i in $(seq 0 $((num_envs - 1))); do obs_topics+=("/env$i/observation:equiarm_msgs/msg/Observation"); done
+  eqa_recorded_run "$run_dir" "${obs_topics[@]}"
 else
   mkdir -p "$run_dir/logs"
   trap eqa_on_exit EXIT; trap 'exit 130' INT; trap 'exit 143' TERM

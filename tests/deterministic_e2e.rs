@@ -18,7 +18,7 @@ use std::process::{Command, Output};
 use equiarm_bag::{ReadMode, Reader};
 use equiarm_msgs::RosMessage as _;
 use equiarm_msgs::cdr;
-use equiarm_msgs::msg::Transition;
+use equiarm_msgs::msg::{Observation, Transition};
 
 const UPDATES: u64 = 30;
 
@@ -75,7 +75,9 @@ fn check_ok(name: &str, out: &Output, run_dir: &Path) {
     );
 }
 
-/// The training envs' recorded transitions as raw CDR payloads, keyed by (env, seq).
+/// The training envs' recorded transitions and the observations they name, as raw CDR payloads,
+/// keyed by (env, seq) (env suffixed `/obs` for observations; a re-published observation must repeat
+/// its payload exactly).
 fn transitions(bag: &Path) -> BTreeMap<(String, u64), Vec<u8>> {
     let mut out = BTreeMap::new();
     let reader = Reader::open(bag).unwrap_or_else(|e| panic!("opening {}: {e}", bag.display()));
@@ -84,8 +86,15 @@ fn transitions(bag: &Path) -> BTreeMap<(String, u64), Vec<u8>> {
             if m.topic == "/transitions" && m.type_name == Transition::TYPE_NAME {
                 let t: Transition =
                     cdr::decode(m.data).map_err(|e| format!("a /transitions payload does not decode: {e}"))?;
-                if t.obs.env != "eval" && out.insert((t.obs.env.clone(), t.obs.seq), m.data.to_vec()).is_some() {
-                    return Err(format!("transition {} seq {} recorded twice", t.obs.env, t.obs.seq));
+                if t.env != "eval" && out.insert((t.env.clone(), t.obs_seq), m.data.to_vec()).is_some() {
+                    return Err(format!("transition {} seq {} recorded twice", t.env, t.obs_seq));
+                }
+            } else if m.type_name == Observation::TYPE_NAME {
+                let o: Observation =
+                    cdr::decode(m.data).map_err(|e| format!("an Observation payload does not decode: {e}"))?;
+                let key = (format!("{}/obs", o.env), o.seq);
+                if o.env != "eval" && out.insert(key, m.data.to_vec()).is_some_and(|old| old != m.data) {
+                    return Err(format!("observation {} seq {} re-published with other data", o.env, o.seq));
                 }
             }
             Ok(())
@@ -111,7 +120,7 @@ fn digest(stream: &BTreeMap<(String, u64), Vec<u8>>) -> u64 {
 /// Transitions per env.
 fn per_env(stream: &BTreeMap<(String, u64), Vec<u8>>) -> BTreeMap<&str, u64> {
     let mut n = BTreeMap::new();
-    for (env, _) in stream.keys() {
+    for (env, _) in stream.keys().filter(|(env, _)| !env.ends_with("/obs")) {
         *n.entry(env.as_str()).or_insert(0) += 1;
     }
     n

@@ -17,7 +17,8 @@ use equiarm_msgs::sensor_msgs::Image;
 use equiarm_msgs::std_msgs::Header;
 use equiarm_sac::agent::{Agent, AgentConfig, ModelKind};
 use equiarm_sac::config::TrainConfig;
-use equiarm_train::ingest::Ingest;
+use equiarm_sac::replay::Stored;
+use equiarm_train::ingest::{BadTransition, Ingest};
 use equiarm_train::policy::{Policy, PolicyMode, WeightsOutcome};
 
 /// A spawned `equiarm` process whose stderr is collected line by line; killed if a test panics.
@@ -302,8 +303,6 @@ fn observation(env: &str, episode: u32, seq: u64, shade: u8) -> Observation {
 }
 
 fn transition(env: &str, episode: u32, seq: u64, expert: bool, last: bool) -> Transition {
-    let (obs, next_obs) =
-        (observation(env, episode, seq, seq as u8), observation(env, episode, seq + 1, seq as u8 + 1));
     let action = GripperCommand {
         obs_seq: seq,
         open_ratio: 1.0,
@@ -311,7 +310,27 @@ fn transition(env: &str, episode: u32, seq: u64, expert: bool, last: bool) -> Tr
         dtheta: -std::f32::consts::FRAC_PI_4,
         ..Default::default()
     };
-    Transition { obs, next_obs, action, reward: last as u8 as f32, done: last, expert, ..Default::default() }
+    Transition {
+        env: env.into(),
+        episode,
+        step: seq as u32,
+        obs_seq: seq,
+        next_obs_seq: seq + 1,
+        action,
+        reward: last as u8 as f32,
+        done: last,
+        expert,
+        ..Default::default()
+    }
+}
+
+/// Feeds `ing` a step as a sim publishes it (its two Observations, a seen one again, then the
+/// Transition); the rows it makes now.
+fn step(ing: &mut Ingest, t: Transition) -> Result<Vec<Stored>, BadTransition> {
+    for s in [t.obs_seq, t.next_obs_seq] {
+        ing.observation(&observation(&t.env, t.episode, s, s as u8)).unwrap();
+    }
+    Ok(ing.transition(t)?.map(|j| ing.rows(j)).unwrap_or_default())
 }
 
 fn result(env: &str, episode: u32, success: bool, expert: bool) -> EpisodeResult {
@@ -323,35 +342,41 @@ fn the_trainer_stores_each_frame_once_keeps_only_successful_demos_and_never_the_
     let cfg = TrainConfig { image_size: SIZE as usize, ..TrainConfig::reduced("block_pulling") };
     let mut ing = Ingest::new(&cfg, "/eval");
     // Consecutive transitions share the frame between them.
-    let a = ing.transition(&transition("env0", 0, 0, false, false)).unwrap();
-    let b = ing.transition(&transition("env0", 0, 1, false, false)).unwrap();
+    let a = step(&mut ing, transition("env0", 0, 0, false, false)).unwrap();
+    let b = step(&mut ing, transition("env0", 0, 1, false, false)).unwrap();
     assert_eq!((a.len(), b.len()), (1, 1));
     assert!(std::sync::Arc::ptr_eq(&a[0].next_obs, &b[0].obs), "the shared frame was stored twice");
     assert!(!std::sync::Arc::ptr_eq(&a[0].obs, &a[0].next_obs));
     assert_eq!(a[0].action, [1.0, 1.0, 0.0, 0.0, -1.0], "physical command → normalised action");
     // Another env's transition with the same seq does not reuse env0's frame.
-    let c = ing.transition(&transition("env1", 0, 2, false, false)).unwrap();
+    let c = step(&mut ing, transition("env1", 0, 2, false, false)).unwrap();
     assert!(!std::sync::Arc::ptr_eq(&c[0].obs, &b[0].next_obs));
     // The eval env is never stored.
-    assert!(ing.transition(&transition("eval", 0, 0, false, false)).unwrap().is_empty());
+    assert!(step(&mut ing, transition("eval", 0, 0, false, false)).unwrap().is_empty());
+    // A Transition that overtakes its Observations waits for them, then is joined.
+    assert!(ing.transition(transition("env7", 0, 0, false, false)).unwrap().is_none());
+    assert!(ing.observation(&observation("env7", 0, 0, 0)).unwrap().is_empty());
+    let joined = ing.observation(&observation("env7", 0, 1, 1)).unwrap();
+    assert_eq!(joined.iter().map(|j| j.t.obs_seq).collect::<Vec<_>>(), [0]);
+    assert_eq!(ing.rows(joined.into_iter().next().unwrap()).len(), 1);
 
     // Expert demos: held until the result; a failed episode's are dropped.
-    assert!(ing.transition(&transition("env2", 0, 0, true, false)).unwrap().is_empty());
-    assert!(ing.transition(&transition("env2", 0, 1, true, true)).unwrap().is_empty());
+    assert!(step(&mut ing, transition("env2", 0, 0, true, false)).unwrap().is_empty());
+    assert!(step(&mut ing, transition("env2", 0, 1, true, true)).unwrap().is_empty());
     assert_eq!(ing.episode(&result("env2", 0, true, true)).len(), 2);
-    assert!(ing.transition(&transition("env2", 1, 3, true, true)).unwrap().is_empty());
+    assert!(step(&mut ing, transition("env2", 1, 3, true, true)).unwrap().is_empty());
     assert!(ing.episode(&result("env2", 1, false, true)).is_empty());
     // A result that overtakes its episode's last transitions decides them on arrival.
-    assert!(ing.transition(&transition("env3", 0, 0, true, false)).unwrap().is_empty());
+    assert!(step(&mut ing, transition("env3", 0, 0, true, false)).unwrap().is_empty());
     assert_eq!(ing.episode(&result("env3", 0, true, true)).len(), 1);
-    assert_eq!(ing.transition(&transition("env3", 0, 1, true, true)).unwrap().len(), 1);
+    assert_eq!(step(&mut ing, transition("env3", 0, 1, true, true)).unwrap().len(), 1);
     assert!(ing.episode(&result("env4", 0, false, true)).is_empty());
-    assert!(ing.transition(&transition("env4", 0, 0, true, true)).unwrap().is_empty());
+    assert!(step(&mut ing, transition("env4", 0, 0, true, true)).unwrap().is_empty());
 
     // A malformed frame is refused with the reason.
-    let mut bad = transition("env5", 0, 0, false, false);
-    bad.obs.depth.encoding = "16UC1".into();
-    assert!(ing.transition(&bad).unwrap_err().to_string().contains("16UC1"));
+    let mut bad = observation("env5", 0, 0, 0);
+    bad.depth.encoding = "16UC1".into();
+    assert!(ing.observation(&bad).unwrap_err().to_string().contains("16UC1"));
     // Regression (issue 28): a NaN or huge reward or a NaN action made the DDS trainer exit without a
     // checkpoint; now the transition is refused, naming the value, and counted.
     for (reward, dx, what) in
@@ -359,11 +384,12 @@ fn the_trainer_stores_each_frame_once_keeps_only_successful_demos_and_never_the_
     {
         let mut t = transition("env6", 0, 0, false, false);
         (t.reward, t.action.dx) = (reward, dx);
-        let e = ing.transition(&t).unwrap_err().to_string();
+        let e = step(&mut ing, t).unwrap_err().to_string();
         assert!(e.contains(what), "{e}");
     }
     let n = &ing.counts;
-    assert_eq!((n.transitions, n.stored, n.expert_held, n.expert_dropped, n.eval, n.bad), (14, 7, 0, 2, 1, 4));
+    assert_eq!((n.transitions, n.stored, n.expert_held, n.expert_dropped, n.eval, n.bad), (14, 8, 0, 2, 1, 3));
+    assert_eq!((n.bad_frames, n.unmatched), (1, 0));
 }
 
 #[test]

@@ -75,6 +75,7 @@ fn bag_eval_policy_measures_agreement_with_the_recorded_actions() {
             let depth: Vec<f32> = (0..n).map(|i| 0.4 + ((i as u32 * 7 + k * 13) % 100) as f32 * 2e-3).collect();
             Observation {
                 seq: k as u64,
+                env: "env0".into(),
                 color: Image::rgb8(Header::default(), side, side, rgb).unwrap(),
                 depth: Image::float32(Header::default(), side, side, &depth).unwrap(),
                 holding: k % 2 == 0,
@@ -90,7 +91,13 @@ fn bag_eval_policy_measures_agreement_with_the_recorded_actions() {
     let bag = dir.join("bag");
     let mut w = Writer::create(&bag, WriterOptions::default()).unwrap();
     let t = w.add_topic(TopicInfo::of::<Transition>("/transitions", &[OfferedQos::reliable(100)])).unwrap();
+    let ot = w.add_topic(TopicInfo::of::<Observation>("/env0/observation", &[OfferedQos::reliable(10)])).unwrap();
     for (i, o) in obs.iter().enumerate() {
+        // Each frame once in its Observation (the first one re-published, as a sim does on a
+        // timeout), then the Transition that names it.
+        for _ in 0..1 + (i == 0) as usize {
+            w.write(ot, i as u64, i as u64, &equiarm_msgs::cdr::encode(o).unwrap()).unwrap();
+        }
         let u = &a[5 * i..5 * i + 5];
         let action = GripperCommand {
             obs_seq: o.seq,
@@ -101,7 +108,8 @@ fn bag_eval_policy_measures_agreement_with_the_recorded_actions() {
             dtheta: std::f32::consts::FRAC_PI_4 * u[4],
             ..Default::default()
         };
-        let tr = Transition { obs: o.clone(), action, ..Default::default() };
+        let tr =
+            Transition { env: "env0".into(), obs_seq: o.seq, next_obs_seq: o.seq + 1, action, ..Default::default() };
         w.write(t, i as u64, i as u64, &equiarm_msgs::cdr::encode(&tr).unwrap()).unwrap();
     }
     w.finish().unwrap();

@@ -93,7 +93,9 @@ fn an_expert_driver_gets_a_successful_episode_with_consistent_transitions_and_ca
         while result.is_none() && Instant::now() < deadline {
             tokio::select! {
                 Some(o) = next(&obs_sub, Duration::from_millis(100)) => {
-                    cmd_pub.publish(expert_reply(&o)).await.unwrap();
+                    if !o.terminal {
+                        cmd_pub.publish(expert_reply(&o)).await.unwrap();
+                    }
                     observations.push(o);
                 }
                 Some(t) = next(&tr_sub, Duration::from_millis(100)) => transitions.push(t),
@@ -104,9 +106,12 @@ fn an_expert_driver_gets_a_successful_episode_with_consistent_transitions_and_ca
                 else => {}
             }
         }
-        // Transitions published just before the result may still be on their way.
+        // Transitions and the terminal frame published just before the result may still be on their way.
         while let Some(t) = next(&tr_sub, Duration::from_millis(300)).await {
             transitions.push(t);
+        }
+        while let Some(o) = next(&obs_sub, Duration::from_millis(300)).await {
+            observations.push(o);
         }
         let r = result.expect("no EpisodeResult within 30 s");
         assert!(r.success && r.expert && !r.eval, "{r:?}");
@@ -115,27 +120,15 @@ fn an_expert_driver_gets_a_successful_episode_with_consistent_transitions_and_ca
         assert_eq!(r.ret, 1.0);
         assert!((r.discounted_return - 0.99f32.powi(r.steps as i32 - 1)).abs() < 1e-5, "{r:?}");
 
-        // One Transition per step, in order, each obs answered by its action and followed by next_obs.
-        assert_eq!(
-            transitions.len(),
-            r.steps as usize,
-            "{:?}",
-            transitions.iter().map(|t| t.obs.seq).collect::<Vec<_>>()
-        );
-        for (k, t) in transitions.iter().enumerate() {
-            assert_eq!((t.obs.step, t.next_obs.step), (k as u32, k as u32 + 1));
-            assert_eq!((t.obs.seq, t.action.obs_seq, t.next_obs.seq), (k as u64, k as u64, k as u64 + 1));
-            assert_eq!(t.action.source, GripperCommand::SOURCE_EXPERT);
-            assert!(t.expert && t.obs.env == "st90" && t.header.stamp == t.next_obs.header.stamp);
-            assert!(t.next_obs.header.stamp.as_nanos() > t.obs.header.stamp.as_nanos(), "sim clock must advance");
-            let last = k + 1 == transitions.len();
-            assert_eq!((t.done, t.timeout, t.reward), (last, false, if last { 1.0 } else { 0.0 }));
-        }
-        // Observations: each seq once per publication (re-publications repeat it), steps 0.. in order.
+        // Observations: each seq once per publication (re-publications repeat it), steps 0..=steps in
+        // order, the last one the episode's terminal frame (published, never answered).
         let mut seqs: Vec<u64> = observations.iter().map(|o| o.seq).collect();
         seqs.dedup();
-        assert_eq!(seqs, (0..r.steps as u64).collect::<Vec<_>>());
+        assert_eq!(seqs, (0..=r.steps as u64).collect::<Vec<_>>());
+        let by_seq: std::collections::HashMap<u64, &Observation> = observations.iter().map(|o| (o.seq, o)).collect();
         for o in &observations {
+            assert_eq!(o.terminal, o.seq == r.steps as u64, "seq {}", o.seq);
+            assert_eq!((o.step as u64, o.env.as_str(), o.episode), (o.seq, "st90", 0));
             assert_eq!(o.expert_action.obs_seq, o.seq);
             assert_eq!(o.expert_action.source, GripperCommand::SOURCE_EXPERT);
             assert_eq!((o.color.encoding.as_str(), o.color.height, o.color.width), ("rgb8", 152, 152));
@@ -143,7 +136,27 @@ fn an_expert_driver_gets_a_successful_episode_with_consistent_transitions_and_ca
             let depth = o.depth.float32_values().unwrap();
             assert!(depth.iter().all(|d| (0.1..=3.0).contains(d)), "depth in metres within near..far");
         }
-        assert!(transitions.iter().any(|t| t.next_obs.holding), "the expert picked the block");
+        assert!(observations.iter().any(|o| o.holding), "the expert picked the block");
+
+        // One Transition per step, in order, naming the observation its action answered and the next one.
+        assert_eq!(
+            transitions.len(),
+            r.steps as usize,
+            "{:?}",
+            transitions.iter().map(|t| t.obs_seq).collect::<Vec<_>>()
+        );
+        for (k, t) in transitions.iter().enumerate() {
+            let k64 = k as u64;
+            assert_eq!((t.env.as_str(), t.episode, t.step), ("st90", 0, k as u32));
+            assert_eq!((t.obs_seq, t.action.obs_seq, t.next_obs_seq), (k64, k64, k64 + 1));
+            assert_eq!(t.action.source, GripperCommand::SOURCE_EXPERT);
+            let (obs, next_obs) = (by_seq[&t.obs_seq], by_seq[&t.next_obs_seq]);
+            assert!(t.expert && t.header.stamp == next_obs.header.stamp);
+            assert!(next_obs.header.stamp.as_nanos() > obs.header.stamp.as_nanos(), "sim clock must advance");
+            let last = k + 1 == transitions.len();
+            assert_eq!((t.done, t.timeout, t.reward), (last, false, if last { 1.0 } else { 0.0 }));
+            assert_eq!(next_obs.terminal, last);
+        }
 
         // Camera topics: frames with the stamp of an observation (best effort: not every one arrives).
         assert!(
@@ -153,15 +166,10 @@ fn an_expert_driver_gets_a_successful_episode_with_consistent_transitions_and_ca
             depths.len(),
             infos.len()
         );
-        let stamps: Vec<_> =
-            transitions.iter().flat_map(|t| [t.obs.header.stamp.clone(), t.next_obs.header.stamp.clone()]).collect();
+        let stamps: Vec<_> = observations.iter().map(|o| o.header.stamp.clone()).collect();
         for c in &colors {
             assert!(stamps.contains(&c.header.stamp), "colour frame stamp {:?} is no observation's", c.header.stamp);
-            let o = transitions
-                .iter()
-                .flat_map(|t| [&t.obs, &t.next_obs])
-                .find(|o| o.header.stamp == c.header.stamp)
-                .unwrap();
+            let o = observations.iter().find(|o| o.header.stamp == c.header.stamp).unwrap();
             assert_eq!(c.data, o.color.data, "camera frame = observation colour");
         }
         for d in &depths {
@@ -214,13 +222,12 @@ fn stale_and_non_finite_commands_are_ignored_and_the_observation_is_republished(
         // A good command steps exactly once from the reset state.
         cmd_pub.publish(expert_reply(&first)).await.unwrap();
         let t = next(&tr_sub, Duration::from_secs(5)).await.expect("no Transition for a good command");
-        assert_eq!((t.obs.seq, t.obs.step, t.next_obs.seq, t.next_obs.step), (0, 0, 1, 1));
-        assert_eq!(t.obs.header.stamp, first.header.stamp);
+        assert_eq!((t.obs_seq, t.step, t.next_obs_seq), (0, 0, 1));
         let deadline = Instant::now() + Duration::from_secs(3);
         let mut seen_next = false;
         while !seen_next && Instant::now() < deadline {
             if let Some(o) = next(&obs_sub, Duration::from_millis(200)).await {
-                seen_next = o.seq == 1;
+                seen_next = o.seq == 1 && o.step == 1 && o.header.stamp == t.header.stamp;
             }
         }
         assert!(seen_next, "no Observation with seq 1 after the step");

@@ -31,6 +31,7 @@ fn observation() -> Observation {
         depth: Image::float32(header.clone(), SIDE, SIDE, &depth).unwrap(),
         holding: false,
         expert_action: GripperCommand { header, obs_seq: 1, open_ratio: 1.0, ..Default::default() },
+        terminal: false,
     }
 }
 

@@ -32,6 +32,15 @@ use serde::{Serialize, de::DeserializeOwned};
 
 include!(concat!(env!("OUT_DIR"), "/messages.rs"));
 
+/// The version of equiarm's message definitions (`msg/*.msg`), one more at every change of a field:
+/// checkpoints of the trainer node record it, and a resume under another version is refused (its
+/// weights and replay would be read through another transport's layout). Bags need no number: they
+/// carry each type's definition text, which readers compare with [`RosMessage::DEFINITION`].
+///
+/// 2: a Transition names its observations by seq (`obs_seq`, `next_obs_seq`) instead of carrying
+/// them; an Observation says whether it is an episode's `terminal` frame.
+pub const SCHEMA_VERSION: u32 = 2;
+
 /// A ROS 2 message type: its names and its definition text.
 pub trait RosMessage: Serialize + DeserializeOwned + Clone + Default + std::fmt::Debug + Send + Sync + 'static {
     /// ROS package, e.g. `sensor_msgs`.

@@ -154,8 +154,20 @@ pub async fn run(opts: &RosOptions, cfg: PlayConfig) -> anyhow::Result<(u64, u64
     let bag = cfg.bag.clone();
     let reading = tokio::task::spawn_blocking(move || {
         let reader = Reader::open(&bag)?;
+        let mut other: std::collections::HashSet<String> = Default::default();
         reader
-            .for_each(ReadMode::Salvage, |m| tx.blocking_send((m.topic.to_string(), m.log_time, m.data.to_vec())))?
+            .for_each(ReadMode::Salvage, |m| {
+                if !m.recorded_as_built() {
+                    if other.insert(m.topic.to_string()) {
+                        warn!(
+                            "skipping {}: recorded with another definition of {} (a bag from another equiarm)",
+                            m.topic, m.type_name
+                        );
+                    }
+                    return Ok(());
+                }
+                tx.blocking_send((m.topic.to_string(), m.log_time, m.data.to_vec()))
+            })?
             .ok();
         Ok::<(), anyhow::Error>(())
     });

@@ -9,19 +9,18 @@
 //! - waits for the `GripperCommand` on `gripper_cmd` whose `obs_seq` is that seq. A command for another
 //!   seq is counted and ignored; one with NaN/inf is rejected (warned, rate-limited) and counted, and
 //!   the node keeps waiting; no command within the timeout re-publishes the same Observation;
-//! - steps the env (out-of-range values are clipped by the library), publishes the `Transition` on
-//!   `/transitions` and, when the episode ends, the `EpisodeResult` on `/episodes`; then resets.
+//! - steps the env (out-of-range values are clipped by the library), publishes the next Observation
+//!   (`terminal` at an episode's end), then the `Transition` naming both by seq on `/transitions`
+//!   (each frame crosses the graph once) and, when the episode ends, the `EpisodeResult` on
+//!   `/episodes`; then resets.
 //!
-//! `seq` counts the observations this env made, from 0. The terminal observation of an episode is
-//! only the `next_obs` of its last Transition (and a camera frame): nothing answers it, so the
-//! `observation` topic skips that one seq at each episode boundary.
+//! `seq` counts the observations this env made, from 0; nothing answers a terminal one.
 //!
 //! Stamps come from a simulated clock: one tick of [`equiarm_train::stepper::SimClock::step_ns`] (the physics time of one env
 //! step, `dt * substeps`) per observation made, from 0; wall time is never read. With `--clock` the
 //! node also publishes that time on `/clock` (`rosgraph_msgs/msg/Clock`, reliable keep-last 10, which
 //! matches rclpy's and rclcpp's best-effort clock subscriptions too) just before each publication of
-//! an observation (again with a re-publication, so the clock never decreases) and at the terminal
-//! one, so ROS tools with `use_sim_time` line up with the stamps. One sim per graph should do it:
+//! an observation (again with a re-publication, so the clock never decreases), so ROS tools with `use_sim_time` line up with the stamps. One sim per graph should do it:
 //! each env has its own simulated time.
 //!
 //! ## Limitations
@@ -158,12 +157,12 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
     tokio::pin!(signal);
     'episodes: while sim.episodes_started() < args.episodes.unwrap_or(u32::MAX) {
         let mut obs = sim.reset()?.clone();
+        publish_clock(&obs.header.stamp).await?;
+        camera.publish(&node, &obs).await?;
+        obs_pub.publish(obs.clone()).await?;
         loop {
-            camera.publish(&node, &obs).await?;
             // Wait for the command naming this observation; re-publish on timeout.
-            let stepped = loop {
-                publish_clock(&obs.header.stamp).await?;
-                obs_pub.publish(obs.clone()).await?;
+            let Step { next, transition, result } = loop {
                 let deadline = tokio::time::Instant::now() + timeout;
                 let got = loop {
                     let left = deadline.saturating_duration_since(tokio::time::Instant::now());
@@ -181,15 +180,17 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
                     None => {
                         sim.stats.republished += 1;
                         debug!("no command for obs_seq {} within {timeout:?}; re-publishing", obs.seq);
+                        publish_clock(&obs.header.stamp).await?;
+                        obs_pub.publish(obs.clone()).await?;
                     }
                 }
             };
-            let Step { transition, result } = stepped;
-            obs = transition.next_obs.clone();
+            // The next frame first, then the Transition that names it.
+            publish_clock(&next.header.stamp).await?;
+            camera.publish(&node, &next).await?;
+            obs_pub.publish(next.clone()).await?;
             transition_pub.publish(transition).await?;
             if let Some(result) = result {
-                publish_clock(&obs.header.stamp).await?;
-                camera.publish(&node, &obs).await?;
                 info!(
                     "{}: episode {} (seed {}) ended after {} steps, success {}",
                     node.name(),
@@ -201,6 +202,7 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
                 episode_pub.publish(result).await?;
                 continue 'episodes;
             }
+            obs = next;
         }
     }
     info!("{}: {:?}", node.name(), sim.stats);

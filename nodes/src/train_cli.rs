@@ -103,6 +103,10 @@ pub struct TrainArgs {
     /// Over DDS: namespace of the evaluation sim+policy pair (its episodes carry eval = true).
     #[arg(long, default_value = "/eval")]
     pub eval_namespace: String,
+    /// Over DDS: namespaces of the training envs, whose `observation` topics carry the frames the
+    /// Transitions name (default: /env0 … /env{N-1} for --num-envs N).
+    #[arg(long, value_delimiter = ',')]
+    pub envs: Vec<String>,
     /// Over DDS: exit when no transition arrived for this many seconds after the first one.
     #[arg(long, default_value_t = 60.0, value_parser = crate::cli_values::seconds)]
     pub idle_timeout_s: f64,
@@ -126,6 +130,14 @@ impl TrainArgs {
             .clone()
             .or_else(|| self.resume.as_deref().and_then(equiarm_train::rundir::run_dir_of))
             .unwrap_or_else(|| PathBuf::from("runs/latest"))
+    }
+
+    /// The training envs' namespaces: `--envs`, else /env0 … /env{n-1}.
+    pub fn env_namespaces(&self, n: usize) -> Vec<String> {
+        match self.envs.is_empty() {
+            true => (0..n).map(|i| format!("/env{i}")).collect(),
+            false => self.envs.clone(),
+        }
     }
 
     /// The validated config these options describe.

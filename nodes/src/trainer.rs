@@ -1,6 +1,7 @@
 //! `equiarm train` over DDS: the trainer node, an adapter around [`equiarm_train::trainer::Trainer`]
 //! (which decides what to store, when to update, evaluate, checkpoint and publish weights; its docs
-//! say how). Here: `/transitions` and `/episodes` in (reliable keep-last 100), actor snapshots out on
+//! say how). Here: the training envs' `observation` topics (`--envs`), `/transitions` and
+//! `/episodes` in (reliable keep-last 100), actor snapshots out on
 //! `/policy/weights` (latched) and a `TrainerStatus` on `/trainer/status` once per second. Updates
 //! run on tokio's blocking pool while this task keeps taking samples (a keep-last reader that is not
 //! read drops samples).
@@ -14,7 +15,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use equiarm_msgs::msg::{EpisodeResult, PolicyWeights, TrainerStatus, Transition};
+use equiarm_msgs::msg::{EpisodeResult, Observation, PolicyWeights, TrainerStatus, Transition};
 use equiarm_sac::agent::Metrics;
 use equiarm_sac::config::TrainConfig;
 use equiarm_sac::learner::{Learner, LearnerError};
@@ -32,6 +33,7 @@ type Update = JoinHandle<(Learner, Result<Metrics, LearnerError>)>;
 /// The node's endpoints and the learner, home or away in an update.
 struct Node {
     node: RosNode,
+    observations: Vec<Subscriber<Observation>>,
     transitions: Subscriber<Transition>,
     episodes: Subscriber<EpisodeResult>,
     weights: Publisher<PolicyWeights>,
@@ -68,6 +70,12 @@ impl Node {
             self.stopping = why.map(|w| (w, Instant::now() + Duration::from_secs(2)));
         }
         let work = self.home.is_some() && self.stopping.is_none() && self.trainer.has_work();
+        // Frames first: the Transitions that name them are joined as they come.
+        for sub in &self.observations {
+            while let Some((o, _)) = sub.recv_timeout(Duration::ZERO).await? {
+                self.trainer.observation(&o);
+            }
+        }
         let mut got = Vec::new();
         while let Some((t, _)) = self.transitions.recv_timeout(Duration::ZERO).await? {
             got.push(Ok(t));
@@ -170,7 +178,12 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     let (trainer, learner) = Trainer::open(cfg, options)?;
     let stop = stop_flag();
     let mut node = RosNode::new("/", "trainer", opts)?;
+    let envs = args.env_namespaces(num_envs);
+    let topics = envs.iter().map(|ns| format!("{}/observation", ns.trim_end_matches('/')));
+    let observations =
+        topics.map(|t| node.subscription::<Observation>(&t, qos::command())).collect::<Result<_, _>>()?;
     let mut n = Node {
+        observations,
         transitions: node.subscription::<Transition>("/transitions", qos::stream(100))?,
         episodes: node.subscription::<EpisodeResult>("/episodes", qos::stream(100))?,
         weights: node.publisher::<PolicyWeights>("/policy/weights", qos::latched())?,

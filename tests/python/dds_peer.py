@@ -10,7 +10,9 @@ the wire. Every loop is bounded in count and time.
                                          its type name, 20 Hz, then good ones
     dds_peer.py clock DOMAIN SECONDS     act as an expert policy for the sim in /clk (answer each
                                          Observation with its expert action) and print every /clock
-                                         sample and every Observation stamp, until an EpisodeResult
+                                         sample and every answered Observation's stamp ("obs"; the
+                                         episode's terminal frame, which nothing answers, as
+                                         "terminal"), until an EpisodeResult
 """
 
 import json
@@ -150,7 +152,11 @@ def clock(domain: int, seconds: float):
                 idle = False
                 emit(event="clock", sec=s.clock.sec, nanosec=s.clock.nanosec)
         for s in obs_reader.take(N=10):
-            if isinstance(s, idl.Observation) and s.seq not in answered:
+            if isinstance(s, idl.Observation) and s.terminal and s.seq not in answered:
+                idle = False
+                answered.add(s.seq)  # the episode's last frame: no command answers it
+                emit(event="terminal", seq=s.seq, sec=s.header.stamp.sec, nanosec=s.header.stamp.nanosec)
+            elif isinstance(s, idl.Observation) and s.seq not in answered:
                 idle = False
                 answered.add(s.seq)
                 emit(event="obs", seq=s.seq, sec=s.header.stamp.sec, nanosec=s.header.stamp.nanosec)

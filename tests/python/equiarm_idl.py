@@ -94,15 +94,21 @@ class Observation(IdlStruct, typename="equiarm_msgs::msg::dds_::Observation_"):
     depth: Image = field(default_factory=Image)
     holding: bool = False
     expert_action: GripperCommand = field(default_factory=GripperCommand)
+    terminal: bool = False
 
 
 @dataclass
 class Transition(IdlStruct, typename="equiarm_msgs::msg::dds_::Transition_"):
+    """One step; its two observations are the Observations of the same `env` whose `seq` are
+    `obs_seq` and `next_obs_seq` (join on (env, seq); see launch_scripts/bag_transitions.py)."""
     header: Header = field(default_factory=Header)
-    obs: Observation = field(default_factory=Observation)
+    env: str = ""
+    episode: uint32 = 0
+    step: uint32 = 0
+    obs_seq: uint64 = 0
+    next_obs_seq: uint64 = 0
     action: GripperCommand = field(default_factory=GripperCommand)
     reward: float32 = 0.0
-    next_obs: Observation = field(default_factory=Observation)
     done: bool = False
     timeout: bool = False
     expert: bool = False

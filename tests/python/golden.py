@@ -97,9 +97,10 @@ def command_typical():
 
 
 def observation(seq, size, seed):
+    """terminal = True (the non-default value of the last field, so its place on the wire is checked)."""
     return idl.Observation(header=header(3, 4, "world"), seq=seq, env="env0", episode=3, step=49,
                            color=rgb8(size, size, "camera"), depth=depth(size, size, "camera", seed),
-                           holding=True, expert_action=command_typical())
+                           holding=True, expert_action=command_typical(), terminal=True)
 
 
 def cases():
@@ -125,10 +126,10 @@ def cases():
     c["GripperCommand.special"] = command_special()
     c["GripperCommand.typical"] = command_typical()
     c["Observation.special"] = observation(2**64 - 2, 152, 2)
-    c["Transition.special"] = idl.Transition(header=header(7, 8, "world"), obs=observation(10, 4, 3),
-                                             action=command_special(), reward=1.0,
-                                             next_obs=observation(11, 4, 4), done=True, timeout=False,
-                                             expert=True)
+    # env = TEXT: a multi-byte string, after which obs_seq needs 4 bytes of alignment padding
+    c["Transition.special"] = idl.Transition(header=header(7, 8, "world"), env=TEXT, episode=2**32 - 1, step=49,
+                                             obs_seq=2**64 - 2, next_obs_seq=2**64 - 1, action=command_special(),
+                                             reward=1.0, done=True, timeout=False, expert=True)
     c["EpisodeResult.special"] = idl.EpisodeResult(header=header(9, 10, "world"), env="环境1",
                                                    task="block_picking", seed=2**64 - 1, episode=7, steps=50,
                                                    success=True, ret=1.0, discounted_return=NAN32, expert=False,

@@ -1,5 +1,5 @@
-"""Tests of the example scripts in launch_scripts/: drive_sim.py and read_bag.py against a real
-`equiarm sim` and `equiarm record`, and equiarm.launch.py with stub `launch`/`launch_ros` modules
+"""Tests of the example scripts in launch_scripts/: drive_sim.py, read_bag.py and bag_transitions.py
+against a real `equiarm sim` and `equiarm record`, and equiarm.launch.py with stub `launch`/`launch_ros` modules
 (no ROS 2 needed).
 
     EQUIARM_BIN=target/debug/equiarm python -m pytest tests/python/test_launch_examples.py
@@ -95,6 +95,19 @@ def test_drive_sim_expert_completes_two_episodes(expert_session):
     # one step line per Transition, each answered by the expert
     assert len(steps) == sum(e["steps"] for e in episodes)
     assert all(s["expert"] and s["source"] == 1 for s in steps)
+    # Transitions name their observations by seq: consecutive frames of env0, numbered across
+    # episodes (an episode's terminal frame is answered by nothing and named by no step as its obs)
+    assert all(s["next_seq"] == s["seq"] + 1 for s in steps)
+    for ep in episodes:
+        mine = [s for s in steps if s["episode"] == ep["episode"]]
+        assert [s["step"] for s in mine] == list(range(ep["steps"]))
+        assert [s["seq"] for s in mine] == list(range(mine[0]["seq"], mine[0]["seq"] + ep["steps"]))
+        assert sum(s["done"] or s["timeout"] for s in mine) == 1 and (mine[-1]["done"] or mine[-1]["timeout"])
+    assert steps[0]["seq"] == 0
+    ep1 = [s for s in steps if s["episode"] == 1]
+    assert ep1[0]["seq"] == episodes[0]["steps"] + 1, "episode 1 starts after episode 0's terminal frame"
+    # the holding flag comes from the Observation the driver answered
+    assert all(isinstance(s["holding"], bool) for s in steps)
     assert lines[-1] == {"event": "done", "env": "env0", "episodes": 2,
                          "successes": sum(e["success"] for e in episodes)}
 
@@ -113,6 +126,9 @@ def test_read_bag_matches_the_run_and_bag_eval(expert_session):
     assert topics["/env0/gripper_cmd"]["type"] == "equiarm_msgs/msg/GripperCommand"
     steps = [e for e in lines if e["event"] == "step"]
     assert topics["/transitions"]["count"] == len(steps)
+    # every frame is on /env0/observation, each episode's terminal one included (re-publishes may add)
+    assert topics["/env0/observation"]["type"] == "equiarm_msgs/msg/Observation"
+    assert topics["/env0/observation"]["count"] >= len(steps) + 2
     driven = [(e["episode"], e["steps"], e["success"]) for e in lines if e["event"] == "episode"]
     assert [(e["episode"], e["steps"], e["success"]) for e in s["episodes"]] == driven
     assert s["eval"]["episodes"] == 0 and s["train"]["episodes"] == 2
@@ -127,6 +143,69 @@ def test_read_bag_matches_the_run_and_bag_eval(expert_session):
     text = subprocess.run([sys.executable, str(SCRIPTS / "read_bag.py"), str(bag)], capture_output=True,
                           text=True, timeout=120, check=True).stdout
     assert "/episodes" in text and "training:" in text and "env0" in text
+
+
+@needs_bin
+def test_bag_transitions_joins_every_recorded_step(expert_session, tmp_path):
+    pytest.importorskip("mcap_ros2")
+    lines, _, _, bag, _ = expert_session
+    steps = [e for e in lines if e["event"] == "step"]
+    npz = tmp_path / "t.npz"
+    out = subprocess.run([sys.executable, str(SCRIPTS / "bag_transitions.py"), str(bag), "--json", "--npz", str(npz)],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    s = json.loads(out.stdout)
+    assert (s["joined"], s["unmatched"], s["inconsistent"]) == (len(steps), 0, 0), s
+    env0 = s["envs"]["env0"]
+    assert env0["episodes"] == 2 and env0["done"] + env0["timeout"] == 2
+    import numpy as np
+    a = np.load(npz)
+    assert a["obs_seq"].tolist() == [st["seq"] for st in steps]
+    assert a["done"].tolist() == [st["done"] for st in steps] and a["reward"].tolist() == [st["reward"] for st in steps]
+    assert a["obs_color"].shape == (len(steps), 64, 64, 3) and a["obs_depth"].shape == (len(steps), 64, 64)
+    assert a["obs_holding"].tolist() == [st["holding"] for st in steps]
+    # within an episode, each step's next_obs is the following step's obs
+    for k in range(len(steps) - 1):
+        if steps[k]["episode"] == steps[k + 1]["episode"]:
+            assert np.array_equal(a["next_obs_color"][k], a["obs_color"][k + 1])
+            assert np.array_equal(a["next_obs_depth"][k], a["obs_depth"][k + 1], equal_nan=True)
+
+
+def test_drive_sim_driver_answers_all_but_terminal_frames(capsys):
+    """drive_sim.py's transport-free Driver: a terminal Observation gets no command, a re-published one
+    the same command again, and the step line comes from the Transition's own fields."""
+    spec = importlib.util.spec_from_file_location("drive_sim", SCRIPTS / "drive_sim.py")
+    ds = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ds)
+    ns = types.SimpleNamespace
+    args = ds.parse_args(["--namespace", "/env0", "--json"])
+    drv = ds.Driver(args, lambda *a: ns(obs_seq=a[0], args=a))
+    expert = ns(open_ratio=0.5, dx=0.01, dy=0.02, dz=-0.03, dtheta=0.1)
+
+    def obs(seq, step, terminal=False, env="env0", holding=False):
+        return ns(env=env, seq=seq, episode=0, step=step, holding=holding, expert_action=expert,
+                  terminal=terminal)
+
+    def tr(obs_seq, step, done=False, env="env0"):
+        return ns(env=env, episode=0, step=step, obs_seq=obs_seq, next_obs_seq=obs_seq + 1, reward=float(done),
+                  done=done, timeout=False, expert=True, action=ns(open_ratio=0.5, dx=0.01, dy=0.02, dz=-0.03,
+                                                                    dtheta=0.1, source=1))
+
+    c0 = drv.on_observation(obs(0, 0, holding=True))
+    assert c0.obs_seq == 0 and c0.args[1:] == (0.5, 0.01, 0.02, -0.03, 0.1, 1)
+    assert drv.on_observation(obs(0, 0, holding=True)) is c0  # a re-published frame: the same command
+    assert drv.on_observation(obs(0, 0, env="env1")) is None  # another env's
+    c1 = drv.on_observation(obs(1, 1))
+    drv.on_transition(tr(0, 0))
+    assert drv.on_observation(obs(2, 2, terminal=True)) is None  # the episode's last frame
+    drv.on_transition(tr(1, 1, done=True))
+    drv.on_transition(tr(5, 0, env="env1"))  # another env's: no line
+    assert c1.obs_seq == 1
+    lines = [json.loads(x) for x in capsys.readouterr().out.splitlines()]
+    assert [(x["seq"], x["next_seq"], x["step"], x["holding"], x["done"]) for x in lines] == \
+        [(0, 1, 0, True, False), (1, 2, 1, False, True)]
+    assert all(x["event"] == "step" and x["env"] == "env0" and x["source"] == 1 for x in lines)
+    assert not drv.holding  # nothing kept once the Transitions named the frames
 
 
 def test_read_bag_metadata_parser():
@@ -221,6 +300,9 @@ def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
     assert all(p.kwargs["cmd"][0] == "/opt/eq/equiarm" for p in procs.values())
     assert procs["recorder"].kwargs["cmd"][1:6] == ["record", "--all", "-q", "-o", os.path.join("runs/x", "bag")]
     assert "/transitions:equiarm_msgs/msg/Transition" in procs["recorder"].kwargs["cmd"]
+    # the observations the Transitions name, subscribed from the start: a self-contained bag
+    for ns in ("/env0", "/env1", "/env2", "/eval"):
+        assert f"{ns}/observation:equiarm_msgs/msg/Observation" in procs["recorder"].kwargs["cmd"]
     tr = procs["trainer"].kwargs["cmd"]
     assert tr[1] == "train" and "--in-process" not in tr
     assert (_flag(tr, "--preset"), _flag(tr, "--task"), _flag(tr, "--num-envs"), _flag(tr, "--seed"),
@@ -272,7 +354,7 @@ def test_launch_file_paper_preset_and_config_file(launch_file, tmp_path):
 
 
 def test_launch_scripts_compile():
-    for name in ("equiarm.launch.py", "drive_sim.py", "read_bag.py"):
+    for name in ("equiarm.launch.py", "drive_sim.py", "read_bag.py", "bag_transitions.py"):
         compile((SCRIPTS / name).read_text(), name, "exec")
 
 
@@ -320,6 +402,11 @@ def test_demo_sh_records_expert_episodes_and_leaves_nothing_running(tmp_path):
                                   capture_output=True, text=True, timeout=120, check=True).stdout)
     assert sorted((e["env"], e["episode"]) for e in s["episodes"]) == [("env0", 0), ("env0", 1), ("env1", 0), ("env1", 1)]
     assert all(e["expert"] for e in s["episodes"]) and s["train"]["successes"] >= 2
+    # lib.sh records each env's observation topic: every Transition joins with its two Observations
+    j = json.loads(subprocess.run([sys.executable, str(SCRIPTS / "bag_transitions.py"), str(out / "bag"), "--json"],
+                                  capture_output=True, text=True, timeout=120, check=True).stdout)
+    assert (j["joined"], j["unmatched"], j["inconsistent"]) == (sum(e["steps"] for e in s["episodes"]), 0, 0), j
+    assert sorted(j["envs"]) == ["env0", "env1"]
     assert not _leftovers(str(out)), _leftovers(str(out))
 
 

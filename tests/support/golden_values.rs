@@ -89,5 +89,6 @@ pub fn observation(seq: u64, size: u32, seed: u32) -> Observation {
         depth: depth(size, size, "camera", seed),
         holding: true,
         expert_action: command_typical(),
+        terminal: true,
     }
 }

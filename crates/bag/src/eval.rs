@@ -75,12 +75,12 @@ impl EpisodeCollector {
     /// Adds a `Transition`; an episode ends at a transition with `done` or `timeout`. Sparse tasks
     /// reward 1 exactly on success, so a final reward > 0 with `done` counts as success.
     pub fn add_transition(&mut self, t: &Transition) {
-        let key = (t.obs.env.clone(), t.obs.episode);
+        let key = (t.env.clone(), t.episode);
         let p = self.open.entry(key.clone()).or_insert_with(|| Partial { expert: true, ..Default::default() });
         let r = t.reward as f64;
         p.ret += r;
-        p.discounted += self.gamma.powi(t.obs.step as i32) * r;
-        p.steps = p.steps.max(t.obs.step + 1);
+        p.discounted += self.gamma.powi(t.step as i32) * r;
+        p.steps = p.steps.max(t.step + 1);
         p.expert &= t.expert;
         if t.done || t.timeout {
             let p = self.open.remove(&key).expect("just inserted");
@@ -180,7 +180,6 @@ pub fn summarize(episodes: &[Episode]) -> Vec<GroupStats> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use equiarm_msgs::msg::Observation;
 
     #[test]
     fn wilson_matches_known_values() {
@@ -194,14 +193,7 @@ mod tests {
     }
 
     fn tr(env: &str, episode: u32, step: u32, reward: f32, done: bool, timeout: bool) -> Transition {
-        Transition {
-            obs: Observation { env: env.into(), episode, step, ..Default::default() },
-            reward,
-            done,
-            timeout,
-            expert: true,
-            ..Default::default()
-        }
+        Transition { env: env.into(), episode, step, reward, done, timeout, expert: true, ..Default::default() }
     }
 
     #[test]

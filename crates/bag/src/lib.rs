@@ -18,6 +18,7 @@
 //! - Messages are read in file order (the order they were received), not re-sorted by log time.
 //! - Files are memory-mapped for reading: do not modify a bag while it is being read.
 
+mod decode;
 mod error;
 pub mod eval;
 mod metadata;
@@ -26,6 +27,7 @@ mod reader;
 mod recover;
 mod writer;
 
+pub use decode::{DecodeError, same_definition};
 pub use error::BagError;
 pub use reader::{BagInfo, FileInfo, FileRead, LostChunk, ReadMode, ReadReport, Reader, RecordedMessage, TopicStats};
 pub use recover::{RecoverReport, recover};

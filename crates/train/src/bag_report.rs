@@ -5,9 +5,9 @@ use std::path::Path;
 
 use anyhow::Context as _;
 use equiarm_bag::eval::{EpisodeCollector, GroupStats, summarize};
-use equiarm_bag::{BagInfo, ReadMode, Reader};
+use equiarm_bag::{BagInfo, DecodeError, ReadMode, Reader};
+use equiarm_msgs::RosMessage;
 use equiarm_msgs::msg::{EpisodeResult, Transition};
-use equiarm_msgs::{RosMessage, cdr};
 
 fn secs(ns: u64) -> f64 {
     ns as f64 / 1e9
@@ -73,21 +73,26 @@ pub fn eval(path: &Path, gamma: f64) -> anyhow::Result<EvalReport> {
     let reader = Reader::open(path)?;
     let mut c = EpisodeCollector::new(gamma);
     let mut bad = 0u64;
+    // A payload that does not decode is counted; a type recorded under another definition stops
+    // the read (every message of it would be misread).
+    let count = |r: Result<(), DecodeError>, bad: &mut u64| match r {
+        Err(e @ DecodeError::OtherDefinition { .. }) => Err(e),
+        Err(DecodeError::Cdr { .. }) => {
+            *bad += 1;
+            Ok(())
+        }
+        Ok(()) => Ok(()),
+    };
     let report = reader.for_each(ReadMode::Salvage, |m| {
         if m.type_name == EpisodeResult::TYPE_NAME {
-            match cdr::decode::<EpisodeResult>(m.data) {
-                Ok(r) => c.add_result(&r),
-                Err(_) => bad += 1,
-            }
+            count(m.decode::<EpisodeResult>().map(|r| c.add_result(&r)), &mut bad)
         } else if m.type_name == Transition::TYPE_NAME {
-            match cdr::decode::<Transition>(m.data) {
-                Ok(t) => c.add_transition(&t),
-                Err(_) => bad += 1,
-            }
+            count(m.decode::<Transition>().map(|t| c.add_transition(&t)), &mut bad)
+        } else {
+            Ok(())
         }
-        Ok::<(), std::convert::Infallible>(())
     })?;
-    let report = report.unwrap_or_else(|e| match e {});
+    let report = report.with_context(|| path.display().to_string())?;
     let (episodes, reconstructed, unfinished) = c.finish();
     Ok(EvalReport {
         groups: summarize(&episodes),

@@ -120,6 +120,10 @@ impl Gate {
     /// An Observation arrived: returns it if it may be answered now, else holds it (replacing the
     /// one held).
     pub fn offer(&mut self, obs: Observation, policy: &Policy) -> Option<Observation> {
+        // An episode's last frame is for the trainer and the recorder: nothing answers it.
+        if obs.terminal {
+            return None;
+        }
         if self.allows(policy.progress(&obs), obs.seq) {
             return Some(obs);
         }

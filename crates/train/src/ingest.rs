@@ -1,11 +1,16 @@
-//! What the trainer node makes of `/transitions` and `/episodes`, without DDS: replay rows with
-//! each frame stored once (per env, the last `next_obs` is reused when the next Transition's `obs`
-//! has its seq), expert demonstrations held per (env, episode) until the EpisodeResult says whether
-//! the episode succeeded (the paper keeps only successful demos), the eval env never stored.
-//! Topics are not ordered with respect to each other: a result may overtake its episode's last
-//! transitions, and then decides them on arrival.
+//! What the trainer node makes of the training envs' `observation` topics, `/transitions` and
+//! `/episodes`, without DDS: each Observation's frame decoded once and kept until the Transitions
+//! that name it (by env and seq) have arrived ([`Joined`]: a frame is shared by the row it ends and
+//! the row it starts), replay rows, expert demonstrations held per (env, episode) until the
+//! EpisodeResult says whether the episode succeeded (the paper keeps only successful demos), the
+//! eval env never stored.
+//!
+//! Topics are not ordered with respect to each other: a Transition may arrive before the
+//! Observations it names (it waits for them, up to [`MAX_WAITING`] per env), and a result may
+//! overtake its episode's last transitions, and then decides them on arrival. Frames are kept up to
+//! [`MAX_FRAMES`] per env; older ones, and frames below the last joined step, are dropped.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::sync::Arc;
 
 use equiarm_msgs::msg::{EpisodeResult, Observation, Transition};
@@ -28,13 +33,52 @@ pub struct Received {
     pub expert_dropped: u64,
     /// Transitions of the eval env (never stored).
     pub eval: u64,
-    /// Malformed transitions (bad image, wrong size), skipped.
+    /// Malformed transitions (bad values, or a frame of a bad Observation), skipped.
     pub bad: u64,
+    /// Observations whose images make no frame of the run's size, skipped.
+    pub bad_frames: u64,
+    /// Transitions dropped because their Observations did not arrive in time.
+    pub unmatched: u64,
     /// Expert episodes decided, and kept (successful).
     pub expert_episodes: (usize, usize),
 }
 
 type Key = (String, u32);
+
+/// Frames kept per env for Transitions still to come.
+pub const MAX_FRAMES: usize = 64;
+/// Transitions per env that may wait for their Observations.
+pub const MAX_WAITING: usize = 64;
+
+/// A Transition with the frames of the two Observations it names.
+#[derive(Clone, Debug)]
+pub struct Joined {
+    /// The Transition.
+    pub t: Transition,
+    /// The frame of Observation `t.obs_seq`.
+    pub obs: Arc<StoredFrame>,
+    /// The frame of Observation `t.next_obs_seq`.
+    pub next_obs: Arc<StoredFrame>,
+}
+
+/// One env's frames and waiting Transitions.
+#[derive(Default)]
+struct EnvFrames {
+    frames: BTreeMap<u64, Arc<StoredFrame>>,
+    waiting: VecDeque<Transition>,
+}
+
+impl EnvFrames {
+    /// The frames `t` names, if both are here (then the frames before them are let go: nothing
+    /// will name them again).
+    fn frames_of(&mut self, t: &Transition) -> Option<(Arc<StoredFrame>, Arc<StoredFrame>)> {
+        let obs = self.frames.get(&t.obs_seq)?.clone();
+        let next_obs = self.frames.get(&t.next_obs_seq)?.clone();
+        self.frames = self.frames.split_off(&t.obs_seq);
+        self.frames.remove(&t.obs_seq);
+        Some((obs, next_obs))
+    }
+}
 
 /// Largest reward magnitude accepted from a peer: every task gives 0 or 1 (docs/paper.md §3.2), so a
 /// larger one is a bug or an attack, and one such row would dominate the critic's loss.
@@ -43,9 +87,6 @@ pub const MAX_ABS_REWARD: f32 = 1000.0;
 /// Why a Transition is refused (counted in [`Received::bad`], never stored).
 #[derive(Debug, thiserror::Error)]
 pub enum BadTransition {
-    /// Its obs or next_obs makes no frame of the run's size.
-    #[error(transparent)]
-    Frame(#[from] BadFrame),
     /// Its reward is NaN, infinite or beyond ±[`MAX_ABS_REWARD`].
     #[error("reward {0} is not finite and within ±{MAX_ABS_REWARD}")]
     Reward(f32),
@@ -63,7 +104,6 @@ impl BadTransition {
     /// The kind of defect, for logging each kind once per sender.
     pub fn cause(&self) -> &'static str {
         match self {
-            BadTransition::Frame(_) => "frame",
             BadTransition::Reward(_) => "reward",
             BadTransition::Action { .. } => "action",
         }
@@ -88,7 +128,7 @@ pub struct Ingest {
     eval_env: String,
     image_size: usize,
     timeout_terminal: bool,
-    last_next: HashMap<String, (u64, Arc<StoredFrame>)>,
+    envs: HashMap<String, EnvFrames>,
     held: HashMap<Key, (Vec<Stored>, bool)>,
     decided: HashMap<Key, bool>,
     /// What happened so far.
@@ -103,7 +143,7 @@ impl Ingest {
             eval_env,
             image_size: cfg.image_size,
             timeout_terminal: cfg.timeout_terminal,
-            last_next: HashMap::new(),
+            envs: HashMap::new(),
             held: HashMap::new(),
             decided: HashMap::new(),
             counts: Received::default(),
@@ -115,58 +155,89 @@ impl Ingest {
         env == self.eval_env
     }
 
-    fn frame(&self, o: &Observation) -> Result<Arc<StoredFrame>, BadFrame> {
-        if let Some((seq, f)) = self.last_next.get(&o.env)
-            && *seq == o.seq
-        {
-            return Ok(f.clone());
-        }
-        let f = frame_of(o)?;
-        if f.size() != self.image_size {
-            return Err(BadFrame::Size { got: f.size(), want: self.image_size });
-        }
-        Ok(Arc::new(f))
-    }
-
-    /// The rows to store now for `t` (none for eval, held expert or malformed transitions).
-    pub fn transition(&mut self, t: &Transition) -> Result<Vec<Stored>, BadTransition> {
-        self.counts.transitions += 1;
-        if self.is_eval(&t.obs.env) {
-            self.counts.eval += 1;
+    /// An Observation of a training env: its frame is kept for the Transitions that name it; the
+    /// Transitions that waited for it are returned, joined.
+    pub fn observation(&mut self, o: &Observation) -> Result<Vec<Joined>, BadFrame> {
+        if self.is_eval(&o.env) {
             return Ok(vec![]);
         }
-        if let Err(e) = check_values(t) {
+        let env = self.envs.entry(o.env.clone()).or_default();
+        if let std::collections::btree_map::Entry::Vacant(slot) = env.frames.entry(o.seq) {
+            let f = frame_of(o).and_then(|f| match f.size() == self.image_size {
+                true => Ok(f),
+                false => Err(BadFrame::Size { got: f.size(), want: self.image_size }),
+            });
+            slot.insert(Arc::new(f.inspect_err(|_| self.counts.bad_frames += 1)?));
+            while env.frames.len() > MAX_FRAMES {
+                env.frames.pop_first();
+            }
+        }
+        let mut joined = Vec::new();
+        let mut still = VecDeque::new();
+        for t in std::mem::take(&mut env.waiting) {
+            match env.frames_of(&t) {
+                Some((obs, next_obs)) => joined.push(Joined { t, obs, next_obs }),
+                None => still.push_back(t),
+            }
+        }
+        env.waiting = still;
+        Ok(joined)
+    }
+
+    /// A Transition: joined with its frames now, or waiting for them (`None`; also for the eval
+    /// env's, which are only counted).
+    pub fn transition(&mut self, t: Transition) -> Result<Option<Joined>, BadTransition> {
+        self.counts.transitions += 1;
+        if self.is_eval(&t.env) {
+            self.counts.eval += 1;
+            return Ok(None);
+        }
+        if let Err(e) = check_values(&t) {
             self.counts.bad += 1;
             return Err(e);
         }
-        let frames = self.frame(&t.obs).and_then(|o| Ok((o, self.frame(&t.next_obs)?)));
-        let (obs, next_obs) = frames.inspect_err(|_| self.counts.bad += 1)?;
-        self.last_next.insert(t.next_obs.env.clone(), (t.next_obs.seq, next_obs.clone()));
+        let env = self.envs.entry(t.env.clone()).or_default();
+        match env.frames_of(&t) {
+            Some((obs, next_obs)) => Ok(Some(Joined { t, obs, next_obs })),
+            None => {
+                env.waiting.push_back(t);
+                if env.waiting.len() > MAX_WAITING {
+                    env.waiting.pop_front();
+                    self.counts.unmatched += 1;
+                }
+                Ok(None)
+            }
+        }
+    }
+
+    /// The rows to store now for a joined transition (none while an expert episode is undecided).
+    pub fn rows(&mut self, j: Joined) -> Vec<Stored> {
+        let Joined { t, obs, next_obs } = j;
         let action = action_of(&t.action).to_normalized();
         let done = t.done || (t.timeout && self.timeout_terminal);
         let row = Stored { obs, next_obs, action, reward: t.reward, done, expert: t.expert };
         if !t.expert {
             self.counts.stored += 1;
-            return Ok(vec![row]);
+            return vec![row];
         }
-        let key = (t.obs.env.clone(), t.obs.episode);
+        let key = (t.env.clone(), t.episode);
         let last = t.done || t.timeout;
         let decided = if last { self.decided.remove(&key) } else { self.decided.get(&key).copied() };
         match decided {
             Some(true) => {
                 self.counts.stored += 1;
-                Ok(vec![row])
+                vec![row]
             }
             Some(false) => {
                 self.counts.expert_dropped += 1;
-                Ok(vec![])
+                vec![]
             }
             None => {
                 let h = self.held.entry(key).or_default();
                 h.0.push(row);
                 h.1 |= last;
                 self.counts.expert_held += 1;
-                Ok(vec![])
+                vec![]
             }
         }
     }

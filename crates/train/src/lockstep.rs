@@ -18,7 +18,9 @@
 
 use std::collections::{BTreeMap, VecDeque};
 
-use equiarm_msgs::msg::{EpisodeResult, Transition};
+use equiarm_msgs::msg::EpisodeResult;
+
+use crate::ingest::Joined;
 
 /// A message the rounds refused, and why.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
@@ -58,10 +60,10 @@ pub enum Refused {
 }
 
 /// One message of a round, in processing order.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub enum Item {
-    /// An env's transition of this round (boxed: it carries two images).
-    Transition(Box<Transition>),
+    /// An env's transition of this round, with its frames.
+    Transition(Box<Joined>),
     /// The result of the episode that transition ended.
     Episode(EpisodeResult),
 }
@@ -69,7 +71,7 @@ pub enum Item {
 /// What one training env has delivered and what is still waiting.
 #[derive(Debug, Default)]
 struct Lane {
-    transitions: VecDeque<Transition>,
+    transitions: VecDeque<Joined>,
     results: BTreeMap<u32, EpisodeResult>,
     last_seq: Option<u64>,
     /// The results of the episodes below this one were handed on.
@@ -84,8 +86,8 @@ pub struct Lockstep {
     rounds: u64,
 }
 
-fn ends_episode(t: &Transition) -> bool {
-    t.done || t.timeout
+fn ends_episode(j: &Joined) -> bool {
+    j.t.done || j.t.timeout
 }
 
 impl Lockstep {
@@ -117,8 +119,8 @@ impl Lockstep {
     }
 
     /// Takes a training env's transition.
-    pub fn transition(&mut self, t: Transition) -> Result<(), Refused> {
-        let (env, seq) = (t.obs.env.clone(), t.obs.seq);
+    pub fn transition(&mut self, t: Joined) -> Result<(), Refused> {
+        let (env, seq) = (t.t.env.clone(), t.t.obs_seq);
         let lane = self.lane(&env, &format!("transition (seq {seq})"))?;
         if let Some(last) = lane.last_seq.filter(|&last| seq <= last) {
             return Err(Refused::OutOfOrder { env, seq, last });
@@ -143,7 +145,7 @@ impl Lockstep {
     pub fn ready(&self) -> bool {
         self.lanes.len() >= self.num_envs
             && self.lanes.values().all(|l| {
-                l.transitions.front().is_some_and(|t| !ends_episode(t) || l.results.contains_key(&t.obs.episode))
+                l.transitions.front().is_some_and(|t| !ends_episode(t) || l.results.contains_key(&t.t.episode))
             })
     }
 
@@ -155,7 +157,7 @@ impl Lockstep {
         let mut items = Vec::with_capacity(self.lanes.len() + 1);
         for lane in self.lanes.values_mut() {
             let t = lane.transitions.pop_front().expect("ready checked it");
-            let result = if ends_episode(&t) { lane.results.remove(&t.obs.episode) } else { None };
+            let result = if ends_episode(&t) { lane.results.remove(&t.t.episode) } else { None };
             items.push(Item::Transition(Box::new(t)));
             if let Some(r) = result {
                 lane.closed_below = r.episode.saturating_add(1);
@@ -181,8 +183,8 @@ impl Lockstep {
         for (env, l) in &self.lanes {
             match l.transitions.front() {
                 None => w.push(format!("transition {} of {env}", self.rounds)),
-                Some(t) if ends_episode(t) && !l.results.contains_key(&t.obs.episode) => {
-                    w.push(format!("EpisodeResult of {env} episode {}", t.obs.episode))
+                Some(t) if ends_episode(t) && !l.results.contains_key(&t.t.episode) => {
+                    w.push(format!("EpisodeResult of {env} episode {}", t.t.episode))
                 }
                 Some(_) => {}
             }
@@ -200,10 +202,13 @@ impl Lockstep {
 mod tests {
     use super::*;
 
-    fn tr(env: &str, episode: u32, seq: u64, last: bool) -> Transition {
-        let mut t = Transition::default();
-        (t.obs.env, t.obs.episode, t.obs.seq, t.done) = (env.into(), episode, seq, last);
-        t
+    fn tr(env: &str, episode: u32, seq: u64, last: bool) -> Joined {
+        let mut t = equiarm_msgs::msg::Transition::default();
+        (t.env, t.episode, t.obs_seq, t.next_obs_seq, t.done) = (env.into(), episode, seq, seq + 1, last);
+        let frame = std::sync::Arc::new(
+            equiarm_sac::frame::StoredFrame::new(8, vec![0; 8 * 8 * 3], &[0.0; 64], false).unwrap(),
+        );
+        Joined { t, obs: frame.clone(), next_obs: frame }
     }
 
     fn res(env: &str, episode: u32) -> EpisodeResult {
@@ -214,7 +219,7 @@ mod tests {
         items
             .iter()
             .map(|i| match i {
-                Item::Transition(t) => format!("{}:{}", t.obs.env, t.obs.seq),
+                Item::Transition(t) => format!("{}:{}", t.t.env, t.t.obs_seq),
                 Item::Episode(r) => format!("{}:ep{}", r.env, r.episode),
             })
             .collect()

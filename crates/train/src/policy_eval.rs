@@ -1,5 +1,5 @@
-//! `equiarm bag eval BAG --policy CKPT`: runs an actor over the observations recorded in a bag's
-//! `Transition`s and reports, per action dimension, how its greedy action (tanh of the mean) agrees
+//! `equiarm bag eval BAG --policy CKPT`: runs an actor over the observations a bag's `Transition`s
+//! name (joined with the recorded `Observation`s on env and seq) and reports, per action dimension, how its greedy action (tanh of the mean) agrees
 //! with the action that was recorded, both in the agent's normalised [-1, 1] units
 //! (`Action::to_normalized`, docs/paper.md §1.2).
 //!
@@ -10,12 +10,13 @@
 //! The architecture is given on the command line (`--net`, `--config`): the checkpoint file holds
 //! only tensors. Observations smaller than the network's input are an error.
 
+use std::collections::HashMap;
 use std::path::Path;
 
 use anyhow::{Context as _, bail};
 use equiarm_bag::{ReadMode, Reader};
+use equiarm_msgs::RosMessage;
 use equiarm_msgs::msg::{GripperCommand, Observation, Transition};
-use equiarm_msgs::{RosMessage, cdr};
 use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
 use equiarm_nn::init::Init;
 use equiarm_nn::nets::{Actor, CnnActor, EquiActor, NetConfig};
@@ -103,16 +104,29 @@ pub fn evaluate(bag: &Path, checkpoint: &Path, net: &str, cfg: &NetConfig) -> an
         Ok(())
     };
     let reader = Reader::open(bag)?;
+    // First the recorded actions by the observation they answered, then those observations' inputs
+    // (a re-published observation counts once).
+    let mut actions: HashMap<(String, u64), [f32; 5]> = HashMap::new();
+    reader
+        .for_each(ReadMode::Salvage, |m| {
+            if m.type_name == Transition::TYPE_NAME {
+                let t = m.decode::<Transition>()?;
+                actions.insert((t.env, t.obs_seq), normalised(&t.action));
+            }
+            Ok::<(), equiarm_bag::DecodeError>(())
+        })?
+        .with_context(|| bag.display().to_string())?;
     let mut failure = None;
     reader
         .for_each(ReadMode::Salvage, |m| {
-            if m.type_name != Transition::TYPE_NAME {
+            if m.type_name != Observation::TYPE_NAME {
                 return Ok(());
             }
             let step = (|| -> anyhow::Result<()> {
-                let t = cdr::decode::<Transition>(m.data)?;
-                inputs.extend(network_input(&t.obs, s).with_context(|| format!("{} seq {}", m.topic, t.obs.seq))?);
-                recorded.push(normalised(&t.action));
+                let o = m.decode::<Observation>()?;
+                let Some(action) = actions.remove(&(o.env.clone(), o.seq)) else { return Ok(()) };
+                inputs.extend(network_input(&o, s).with_context(|| format!("{} seq {}", m.topic, o.seq))?);
+                recorded.push(action);
                 if recorded.len() == BATCH {
                     run(&mut inputs, &mut recorded)?;
                 }
@@ -126,7 +140,7 @@ pub fn evaluate(bag: &Path, checkpoint: &Path, net: &str, cfg: &NetConfig) -> an
     }
     run(&mut inputs, &mut recorded)?;
     if pairs.is_empty() {
-        bail!("{}: no Transition messages to evaluate the policy on", bag.display());
+        bail!("{}: no Transition with its recorded Observation to evaluate the policy on", bag.display());
     }
     Ok(agreement(&pairs))
 }

@@ -3,9 +3,9 @@
 //! metres, holding, the expert's action with `source = EXPERT` and `obs_seq = seq`); each step a
 //! `Transition`; each episode's end an `EpisodeResult`.
 //!
-//! `seq` counts the observations this env made, from 0. The terminal observation of an episode is
-//! only the `next_obs` of its last Transition: nothing answers it, so the `observation` topic skips
-//! that one seq at each episode boundary.
+//! `seq` counts the observations this env made, from 0. A Transition names its two observations by
+//! seq; an episode's last observation (`terminal` set) is published like the others, and nothing
+//! answers it.
 //!
 //! Stamps come from a simulated clock: one tick of [`SimClock::step_ns`] (the physics time of one env
 //! step, `dt * substeps`) per observation made, from 0; wall time is never read.
@@ -90,10 +90,13 @@ pub fn non_finite_fields(c: &GripperCommand) -> Option<String> {
     (!bad.is_empty()).then(|| bad.join(", "))
 }
 
-/// A step the env took: the Transition to publish and, when the episode ended, its EpisodeResult
-/// ([`Stepper::reset`] then starts the next).
+/// A step the env took: the next Observation and the Transition to publish (in that order, so a
+/// reader usually has the frame before the Transition naming it) and, when the episode ended, its
+/// EpisodeResult ([`Stepper::reset`] then starts the next).
 #[derive(Debug)]
 pub struct Step {
+    /// The observation after the step (`terminal` when the episode ended).
+    pub next: Observation,
     /// The transition.
     pub transition: Transition,
     /// The episode's result, when it ended.
@@ -206,21 +209,25 @@ impl Stepper {
         self.discount *= equiarm_sac::agent::GAMMA as f32;
         self.seq += 1;
         let steps = r.observation.step;
-        let next = observation(r.observation, self.seq, &self.name, self.episode, self.clock.tick())?;
+        let mut next = observation(r.observation, self.seq, &self.name, self.episode, self.clock.tick())?;
+        next.terminal = r.done;
         let ended_by_task = r.info.success || r.info.invalid;
         let transition = Transition {
             header: next.header.clone(),
-            obs,
+            env: self.name.clone(),
+            episode: self.episode,
+            step: obs.step,
+            obs_seq: obs.seq,
+            next_obs_seq: next.seq,
             action: cmd,
             reward: r.reward,
-            next_obs: next.clone(),
             done: ended_by_task,
             timeout: r.info.timeout && !ended_by_task,
             expert,
         };
         if !r.done {
-            self.obs = Some(next);
-            return Ok(Some(Step { transition, result: None }));
+            self.obs = Some(next.clone());
+            return Ok(Some(Step { next, transition, result: None }));
         }
         let result = EpisodeResult {
             header: next.header.clone(),
@@ -237,7 +244,7 @@ impl Stepper {
         };
         self.stats.episodes += 1;
         self.seq += 1;
-        Ok(Some(Step { transition, result: Some(result) }))
+        Ok(Some(Step { next, transition, result: Some(result) }))
     }
 
     fn reject(&mut self, cmd: &GripperCommand, why: &str) {
@@ -286,6 +293,7 @@ pub fn observation(
             source: GripperCommand::SOURCE_EXPERT,
         },
         header,
+        terminal: false,
     })
 }
 

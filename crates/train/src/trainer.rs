@@ -1,5 +1,6 @@
-//! The trainer node's logic without DDS: one [`Learner`] fed from `/transitions` and `/episodes`
-//! through [`Ingest`] (frames stored once, demos only from successful episodes, never the eval env),
+//! The trainer node's logic without DDS: one [`Learner`] fed from the training envs'
+//! `observation` topics, `/transitions` and `/episodes` through [`Ingest`] (which joins each
+//! Transition with the frames of the Observations it names) (frames stored once, demos only from successful episodes, never the eval env),
 //! evaluations from the eval env's episode results, actor snapshots ([`PolicyWeights`]) and a
 //! [`TrainerStatus`] once per second. The node (`equiarm_nodes::trainer`) moves messages in and out
 //! and runs updates on a blocking thread; [`Trainer`] decides everything else.
@@ -42,7 +43,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::TrainError;
 use crate::evaluation::{Episode, EvalResult};
-use crate::ingest::{Ingest, UpdateDebt};
+use crate::ingest::{Ingest, Joined, UpdateDebt};
 use crate::lockstep::{Item, Lockstep, Refused};
 use crate::progress::Progress;
 use crate::record::{RunRecord, RunSummary};
@@ -54,9 +55,16 @@ pub const STATE_FILE: &str = "trainer.json";
 /// Saved beside each checkpoint ([`STATE_FILE`]).
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 struct NodeState {
+    /// The message schema the run's transport used ([`equiarm_msgs::SCHEMA_VERSION`]; absent: 1).
+    #[serde(default = "schema_v1")]
+    message_schema: u32,
     global_step: u64,
     evals: Vec<EvalResult>,
     version: u64,
+}
+
+fn schema_v1() -> u32 {
+    1
 }
 
 /// How a trainer runs (not part of the config: a checkpoint resumes under other options).
@@ -143,6 +151,16 @@ impl Trainer {
                         format!("{e} (not a checkpoint of the trainer node: resume it with the in-process loop)"),
                     )
                 })?;
+                if st.message_schema != equiarm_msgs::SCHEMA_VERSION {
+                    return Err(TrainError::io(
+                        &ck,
+                        format!(
+                            "written by a trainer with message schema {}, this one speaks {}: resume it with the equiarm that wrote it",
+                            st.message_schema,
+                            equiarm_msgs::SCHEMA_VERSION
+                        ),
+                    ));
+                }
                 info!("resumed {} at {} updates", ck.display(), learner.updates());
                 RunRecord::open(
                     &cfg,
@@ -205,38 +223,54 @@ impl Trainer {
         (self.debt.owed() > 0 && ready) || self.lockstep.as_ref().is_some_and(Lockstep::ready)
     }
 
-    /// A Transition from the graph: into the rows waiting for the learner, or (lock-step) into its round.
+    /// An Observation of a training env: its frame, kept for the Transitions that name it (those
+    /// that waited for it go on now).
+    pub fn observation(&mut self, o: &equiarm_msgs::msg::Observation) {
+        match self.ingest.observation(o) {
+            Ok(joined) => joined.into_iter().for_each(|j| self.joined(j)),
+            Err(e) => self.log_bad(&o.env, o.seq, "observation", &e),
+        }
+    }
+
+    /// A Transition from the graph: once joined with its frames, into the rows waiting for the
+    /// learner, or (lock-step) into its round.
     pub fn transition(&mut self, t: Transition) {
         self.last_transition = Some(Instant::now());
-        let eval = self.ingest.is_eval(&t.obs.env);
+        let (env, seq) = (t.env.clone(), t.obs_seq);
+        match self.ingest.transition(t) {
+            Ok(Some(j)) => self.joined(j),
+            Ok(None) => {}
+            Err(e) => self.log_bad(&env, seq, e.cause(), &e),
+        }
+    }
+
+    /// Logs a refused message once per env and cause.
+    fn log_bad(&mut self, env: &str, seq: u64, cause: &'static str, e: &dyn std::fmt::Display) {
+        if self.bad_logged.insert((env.to_string(), cause)) {
+            warn!(
+                "skipping a message of '{env}' (seq {seq}): {e} (further {cause} defects of this env are counted, not logged)"
+            );
+        }
+    }
+
+    /// A training env's transition with its frames.
+    fn joined(&mut self, j: Joined) {
         match self.lockstep.as_mut() {
-            Some(ls) if !eval => {
-                let r = ls.transition(t);
+            Some(ls) => {
+                let r = ls.transition(j);
                 self.count_refused(r);
             }
-            _ => {
-                self.take_transition(&t);
-                if !eval {
-                    self.debt.transition(self.known.1 + self.queue.len());
-                }
+            None => {
+                self.take_transition(j);
+                self.debt.transition(self.known.1 + self.queue.len());
             }
         }
     }
 
-    fn take_transition(&mut self, t: &Transition) {
-        match self.ingest.transition(t) {
-            Ok(rows) => self.queue.extend(rows),
-            Err(e) if self.bad_logged.insert((t.obs.env.clone(), e.cause())) => warn!(
-                "skipping a transition of '{}' (seq {}): {e} (further {} defects of this env are counted, not logged)",
-                t.obs.env,
-                t.obs.seq,
-                e.cause()
-            ),
-            Err(_) => {}
-        }
-        if !self.ingest.is_eval(&t.obs.env) {
-            self.global_step += 1;
-        }
+    fn take_transition(&mut self, j: Joined) {
+        let rows = self.ingest.rows(j);
+        self.queue.extend(rows);
+        self.global_step += 1;
     }
 
     fn take_episode(&mut self, r: &EpisodeResult) -> Result<(), TrainError> {
@@ -307,7 +341,7 @@ impl Trainer {
             Some(items) => {
                 for item in items {
                     match item {
-                        Item::Transition(t) => self.take_transition(&t),
+                        Item::Transition(j) => self.take_transition(*j),
                         Item::Episode(r) => self.take_episode(&r)?,
                     }
                 }
@@ -363,7 +397,12 @@ impl Trainer {
     }
 
     fn state(&self) -> NodeState {
-        NodeState { global_step: self.global_step, evals: self.record.evals().to_vec(), version: self.version }
+        NodeState {
+            message_schema: equiarm_msgs::SCHEMA_VERSION,
+            global_step: self.global_step,
+            evals: self.record.evals().to_vec(),
+            version: self.version,
+        }
     }
 
     fn checkpoint(&mut self, learner: &Learner) -> Result<PathBuf, TrainError> {
@@ -450,9 +489,11 @@ impl Trainer {
             c.transitions, c.stored, c.expert_held, c.eval
         );
         info!(
-            "expert transitions dropped (failed episodes) {}, malformed {}; replay {}",
+            "expert transitions dropped (failed episodes) {}, malformed {} (observations {}), without their observations {}; replay {}",
             c.expert_dropped,
             c.bad,
+            c.bad_frames,
+            c.unmatched,
             learner.replay().len()
         );
         Ok(RunSummary {
