@@ -117,6 +117,7 @@ fn cases() -> BTreeMap<String, Case> {
         "PolicyWeights.special",
         case(PolicyWeights {
             header: header(11, 12, ""),
+            run_id: "run-7f3a".into(),
             version: 1,
             updates: 1 << 40,
             model: "equi_d4".into(),

@@ -433,3 +433,38 @@ fn the_policy_refuses_foreign_weights_and_answers_a_repeated_seq_identically() {
     let e = expert.answer(&observation("env0", 0, 4, 1)).unwrap();
     assert_eq!((e.obs_seq, e.source, e.dx), (4, GripperCommand::SOURCE_EXPERT, 0.01));
 }
+
+/// Regression (issue 28): one weights message with version 2^64−1 made a policy ignore every later
+/// version without a word. Versions now only order weights within one run; another run's weights are
+/// followed and reported, older ones of the same run reported and ignored.
+#[test]
+fn weights_versions_only_grow_within_a_run_and_a_stray_version_cannot_silence_the_trainer() {
+    let arch = AgentConfig { model: ModelKind::Cnn, hidden: 8, input_size: 16, ..AgentConfig::default() };
+    let mut policy = Policy::new(PolicyMode::Greedy, arch.clone(), SIZE as usize, None, 1).unwrap();
+    let data = Agent::new(arch, 5).unwrap().actor_bytes().unwrap();
+    let w = |run: &str, version| PolicyWeights {
+        run_id: run.into(),
+        version,
+        model: "cnn".into(),
+        format: "safetensors".into(),
+        data: data.clone(),
+        ..Default::default()
+    };
+    assert_eq!(policy.on_weights(w("run-a", 1)), WeightsOutcome::Loaded);
+    assert_eq!(policy.on_weights(w("run-a", 3)), WeightsOutcome::Loaded);
+    assert_eq!(policy.on_weights(w("run-a", 3)), WeightsOutcome::Stale, "a re-delivery");
+    assert_eq!(policy.on_weights(w("run-a", 2)), WeightsOutcome::Older { current: 3 });
+    // A stray message of another run with the largest version: followed, and said so …
+    assert_eq!(policy.on_weights(w("stray", u64::MAX)), WeightsOutcome::NewRun { was: "run-a".into() });
+    assert_eq!(policy.version(), u64::MAX);
+    // … and the trainer's next version is taken again (its run differs), not ignored.
+    assert_eq!(policy.on_weights(w("run-a", 4)), WeightsOutcome::NewRun { was: "stray".into() });
+    assert_eq!(policy.version(), 4);
+    // Weights full of NaN are refused; the weights in use stay.
+    let mut nan = w("run-a", 5);
+    // safetensors: an 8-byte header length, the JSON header, then the f32 data: NaN in the first value.
+    let start = 8 + u64::from_le_bytes(nan.data[..8].try_into().unwrap()) as usize;
+    nan.data[start..start + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    assert!(matches!(policy.on_weights(nan), WeightsOutcome::Failed(_)));
+    assert_eq!(policy.version(), 4);
+}

@@ -38,7 +38,8 @@ include!(concat!(env!("OUT_DIR"), "/messages.rs"));
 /// carry each type's definition text, which readers compare with [`RosMessage::DEFINITION`].
 ///
 /// 2: a Transition names its observations by seq (`obs_seq`, `next_obs_seq`) instead of carrying
-/// them; an Observation says whether it is an episode's `terminal` frame.
+/// them; an Observation says whether it is an episode's `terminal` frame; PolicyWeights carry the
+/// trainer's `run_id`, within which versions only grow.
 pub const SCHEMA_VERSION: u32 = 2;
 
 /// A ROS 2 message type: its names and its definition text.

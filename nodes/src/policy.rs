@@ -51,11 +51,13 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
             r = obs_sub.recv() => gate.offer(r?.0, &policy),
             r = recv_some(weights_sub.as_ref()) => {
                 let (w, _) = r?;
-                let (version, updates) = (w.version, w.updates);
+                let (version, updates, run) = (w.version, w.updates, w.run_id.clone());
                 match policy.on_weights(w) {
                     // In lock-step a new version comes every round: log the first and every 100th.
                     WeightsOutcome::Loaded if !args.deterministic || version % 100 == 1 => info!("weights version {version} (updates {updates})"),
                     WeightsOutcome::Loaded | WeightsOutcome::Stale => {}
+                    WeightsOutcome::NewRun { was } => warn!("weights of run '{run}' (version {version}), after run '{was}': following the new run"),
+                    WeightsOutcome::Older { current } => warn!("ignoring weights version {version} of run '{run}': version {current} is in use and versions only grow within a run"),
                     WeightsOutcome::Refused(why) => if refused.insert(why.clone()) { warn!("refusing weights version {version}: {why}") },
                     WeightsOutcome::Failed(why) => warn!("weights version {version} did not load, keeping version {}: {why}", policy.version()),
                 }

@@ -132,6 +132,7 @@ class EpisodeResult(IdlStruct, typename="equiarm_msgs::msg::dds_::EpisodeResult_
 @dataclass
 class PolicyWeights(IdlStruct, typename="equiarm_msgs::msg::dds_::PolicyWeights_"):
     header: Header = field(default_factory=Header)
+    run_id: str = ""
     version: uint64 = 0
     updates: uint64 = 0
     model: str = ""

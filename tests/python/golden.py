@@ -134,7 +134,8 @@ def cases():
                                                    task="block_picking", seed=2**64 - 1, episode=7, steps=50,
                                                    success=True, ret=1.0, discounted_return=NAN32, expert=False,
                                                    eval=True)
-    c["PolicyWeights.special"] = idl.PolicyWeights(header=header(11, 12, ""), version=1, updates=2**40,
+    c["PolicyWeights.special"] = idl.PolicyWeights(header=header(11, 12, ""), run_id="run-7f3a", version=1,
+                                                   updates=2**40,
                                                    model="equi_d4", format="safetensors",
                                                    data=ramp(1 << 20, 31, 17))
     c["TrainerStatus.special"] = idl.TrainerStatus(header=header(13, 14, ""), updates=5000, transitions=2**33,

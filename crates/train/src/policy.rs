@@ -108,8 +108,20 @@ pub fn frame_of(obs: &Observation) -> Result<StoredFrame, BadFrame> {
 pub enum WeightsOutcome {
     /// Loaded: the node now acts with this version.
     Loaded,
-    /// Not newer than the current version; ignored.
+    /// Loaded, from another run than the weights before (a trainer started afresh, or another
+    /// trainer on the domain): its versions count from here.
+    NewRun {
+        /// The run the node followed.
+        was: String,
+    },
+    /// The version in use again (a re-delivery); ignored.
     Stale,
+    /// Older than the version in use within the same run: versions only grow within a run, so it
+    /// is ignored (and worth a warning: something republishes old weights).
+    Older {
+        /// The version in use.
+        current: u64,
+    },
     /// Another model or format: refused (the reason, logged once per reason).
     Refused(String),
     /// The payload did not load; the old weights stay.
@@ -124,6 +136,8 @@ pub struct Policy {
     rng: Rng,
     last: Option<(u64, GripperCommand)>,
     version: u64,
+    /// The run the weights in use come from (None: the initial weights).
+    run: Option<String>,
     latencies: VecDeque<f64>,
     actions: u64,
     expert_episodes: u32,
@@ -158,6 +172,7 @@ impl Policy {
             rng: Rng::new(seed),
             last: None,
             version: 0,
+            run: None,
             latencies: VecDeque::new(),
             actions: 0,
             expert_episodes: 0,
@@ -278,7 +293,10 @@ impl Policy {
         Some((at(0.5), at(0.95)))
     }
 
-    /// Takes new weights if they are ours and newer (the payload moves into the actor, uncopied).
+    /// Takes new weights if they are ours (model, format, finite values) and newer within their run
+    /// (the payload moves into the actor, uncopied). Weights of another run are taken too, and
+    /// say so ([`WeightsOutcome::NewRun`]): a stray message can never make the node ignore its
+    /// trainer's later versions without a word.
     pub fn on_weights(&mut self, w: PolicyWeights) -> WeightsOutcome {
         let Some(agent) = self.agent.as_mut() else {
             return WeightsOutcome::Refused(format!("mode {:?} takes no weights", self.mode));
@@ -290,14 +308,21 @@ impl Policy {
         if w.format != "safetensors" {
             return WeightsOutcome::Refused(format!("format '{}' is not 'safetensors'", w.format));
         }
-        if w.version <= self.version {
+        let same_run = self.run.as_deref().is_none_or(|r| r == w.run_id);
+        if same_run && w.version == self.version {
             return WeightsOutcome::Stale;
         }
-        let label = format!("PolicyWeights version {}", w.version);
+        if same_run && w.version < self.version {
+            return WeightsOutcome::Older { current: self.version };
+        }
+        let label = format!("PolicyWeights version {} of run '{}'", w.version, w.run_id);
         match agent.load_actor_bytes(w.data, &label).map_err(|e| e.to_string()) {
             Ok(()) => {
                 self.version = w.version;
-                WeightsOutcome::Loaded
+                match self.run.replace(w.run_id) {
+                    Some(was) if !same_run => WeightsOutcome::NewRun { was },
+                    _ => WeightsOutcome::Loaded,
+                }
             }
             Err(e) => WeightsOutcome::Failed(e),
         }

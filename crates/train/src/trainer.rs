@@ -8,7 +8,8 @@
 //! - One update per `num_envs` non-eval transitions once the replay holds `training_starts`
 //!   (docs/paper.md §2); updates owed while one runs are caught up ([`UpdateDebt`]).
 //! - Weights: version 1 (the initial actor) at start, then after the first update and every
-//!   `weights_every` updates.
+//!   `weights_every` updates, all with the run's id (made at a fresh start, kept in checkpoints), so
+//!   a policy can tell a new run from an old version.
 //! - Evaluations as in the paper: the eval env's episodes that end once the update count has
 //!   reached the next multiple of `eval_every`, `eval_episodes` of them; the ones in between are
 //!   dropped.
@@ -58,6 +59,8 @@ struct NodeState {
     /// The message schema the run's transport used ([`equiarm_msgs::SCHEMA_VERSION`]; absent: 1).
     #[serde(default = "schema_v1")]
     message_schema: u32,
+    /// The run's id in its weights messages (kept when it resumes).
+    run_id: String,
     global_step: u64,
     evals: Vec<EvalResult>,
     version: u64,
@@ -109,6 +112,7 @@ pub struct Trainer {
     queue: Vec<Stored>,
     bad_logged: HashSet<(String, &'static str)>,
     refused: u64,
+    run_id: String,
     global_step: u64,
     version: u64,
     /// While the learner is away (an update running): its updates, replay length, expert rows and
@@ -120,6 +124,13 @@ pub struct Trainer {
     last_transition: Option<Instant>,
     last_status: (Instant, u64, u64),
     progress: Option<Progress>,
+}
+
+/// A new run's id: its task, model and seed, and the wall clock at its start (hex ns), so two
+/// fresh runs never share one.
+fn new_run_id(cfg: &TrainConfig) -> String {
+    let ns = wall_stamp().stamp.as_nanos();
+    format!("{}-{}-s{}-{ns:x}", cfg.task, cfg.agent.model.name(), cfg.seed)
 }
 
 /// A wall-clock header stamp.
@@ -181,6 +192,7 @@ impl Trainer {
             queue: Vec::new(),
             bad_logged: HashSet::new(),
             refused: 0,
+            run_id: if st.run_id.is_empty() { new_run_id(&cfg) } else { st.run_id },
             global_step: st.global_step,
             version: st.version,
             started: now,
@@ -399,6 +411,7 @@ impl Trainer {
     fn state(&self) -> NodeState {
         NodeState {
             message_schema: equiarm_msgs::SCHEMA_VERSION,
+            run_id: self.run_id.clone(),
             global_step: self.global_step,
             evals: self.record.evals().to_vec(),
             version: self.version,
@@ -415,6 +428,7 @@ impl Trainer {
         self.version += 1;
         Ok(PolicyWeights {
             header: wall_stamp(),
+            run_id: self.run_id.clone(),
             version: self.version,
             updates: learner.updates(),
             model: self.cfg.agent.model.name().to_string(),
