@@ -22,6 +22,7 @@ mod decode;
 mod error;
 pub mod eval;
 mod metadata;
+mod metadata_check;
 pub mod qos;
 mod reader;
 mod recover;
@@ -29,6 +30,7 @@ mod writer;
 
 pub use decode::{DecodeError, same_definition};
 pub use error::BagError;
+pub use metadata_check::MetadataCheck;
 pub use reader::{BagInfo, FileInfo, FileRead, LostChunk, ReadMode, ReadReport, Reader, RecordedMessage, TopicStats};
 pub use recover::{RecoverReport, recover};
 pub use writer::{BagSummary, Compression, TopicId, TopicInfo, Writer, WriterOptions};

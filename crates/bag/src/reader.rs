@@ -133,11 +133,16 @@ pub struct BagInfo {
     pub truncated: Vec<(PathBuf, String)>,
     /// Chunks that do not decode: their messages are not counted above.
     pub lost: Vec<LostChunk>,
+    /// The bag directory's `metadata.yaml` checked against the files (`None`: a single file, or a
+    /// directory without one).
+    pub metadata: Option<crate::MetadataCheck>,
 }
 
 /// A bag opened for reading.
 pub struct Reader {
     files: Vec<(PathBuf, memmap2::Mmap)>,
+    /// The bag directory, when opened as one.
+    dir: Option<PathBuf>,
 }
 
 fn split_index(name: &str) -> Option<u64> {
@@ -186,7 +191,7 @@ impl Reader {
             }
             files.push((p, map));
         }
-        Ok(Self { files })
+        Ok(Self { files, dir: meta.is_dir().then(|| path.to_path_buf()) })
     }
 
     /// The files, in read order.
@@ -225,7 +230,7 @@ impl Reader {
     }
 
     /// Files, topics with types, counts and sizes, and the time span, from a full read (salvage mode,
-    /// so a killed bag is described as far as it goes).
+    /// so a killed bag is described as far as it goes), and how `metadata.yaml` agrees with them.
     pub fn info(&self) -> Result<BagInfo, BagError> {
         let mut info = BagInfo::default();
         let report = self
@@ -250,6 +255,7 @@ impl Reader {
             info.files.push(FileInfo { path: path.clone(), size: map.len() as u64, messages, complete, compression });
         }
         (info.truncated, info.lost) = (report.truncated, report.lost);
+        info.metadata = self.dir.as_deref().and_then(|d| crate::metadata_check::check(d, &info));
         Ok(info)
     }
 }

@@ -47,6 +47,17 @@ pub fn info_text(path: &Path, info: &BagInfo) -> String {
     for l in &info.lost {
         let _ = writeln!(s, "Damage:       {}", lost_text(l));
     }
+    match &info.metadata {
+        Some(m) if m.ok() => {
+            let _ = writeln!(s, "Metadata:     metadata.yaml matches the files");
+        }
+        Some(m) => {
+            for p in &m.problems {
+                let _ = writeln!(s, "Metadata:     METADATA MISMATCH: metadata.yaml {p}");
+            }
+        }
+        None => {}
+    }
     let _ = writeln!(s, "Topics:");
     for (name, t) in &info.topics {
         let _ =
