@@ -1,0 +1,243 @@
+//! The `equiarm rotest` subcommands (clap derive): `data`, `snapshots`, `bound`, `train`, `report`.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use equiarm_sim::rotest::{Corruptions, PAPER_SETTINGS, PairConfig};
+
+use crate::bound::dataset_bound;
+use crate::dataset::Dataset;
+use crate::error::Result;
+use crate::generate::{generate, setting_file_stem, write_snapshot};
+use crate::train::{ModelKind, TrainConfig};
+
+/// `equiarm rotest …`.
+#[derive(Debug, clap::Subcommand)]
+pub enum RotestCommand {
+    /// Generate a dataset: DIR/pairs.rotest.
+    #[command(
+        after_help = "Example:\n  equiarm rotest data --corrupt grid,side --pairs 2000 --seed 0 -o data/rotest/side+grid"
+    )]
+    Data {
+        /// Corruption setting: `none` or a comma-separated list of grid, occlusion,
+        /// random_light_color, light_effect, two_light_color, two_specular, squeeze, reflect,
+        /// condition_reverse (invert-label), side.
+        #[arg(long, default_value = "none")]
+        corrupt: String,
+        /// Number of pairs.
+        #[arg(long, default_value_t = 2000)]
+        pairs: usize,
+        /// Generator seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Stored image side, pixels (the paper's 152).
+        #[arg(long, default_value_t = 152)]
+        size: usize,
+        /// Rendering supersampling factor (images are area-downsampled from size · supersample).
+        #[arg(long, default_value_t = 2)]
+        supersample: usize,
+        /// Output directory.
+        #[arg(short, long)]
+        out: PathBuf,
+    },
+    /// Write snapshot PNGs of the first pairs of each of the 15 settings: OUT/<setting>.png.
+    Snapshots {
+        /// Pairs per setting (rows of each PNG).
+        #[arg(long, default_value_t = 2)]
+        pairs: usize,
+        /// Generator seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Image side, pixels.
+        #[arg(long, default_value_t = 152)]
+        size: usize,
+        /// Output directory.
+        #[arg(short, long)]
+        out: PathBuf,
+    },
+    /// Print the upper bound on the accuracy of a C8-invariant classifier on a dataset.
+    Bound {
+        /// Dataset directory (or its pairs.rotest file).
+        data: PathBuf,
+    },
+    /// Train and evaluate one network on one dataset: OUT/run.json and OUT/best.safetensors.
+    #[command(
+        after_help = "Example (2-core size):\n  equiarm rotest train --data data/rotest/none --model equi --train-pairs 400 --seed 0 -o runs/none/equi/400/s0"
+    )]
+    Train {
+        /// Dataset directory (or its pairs.rotest file).
+        #[arg(long)]
+        data: PathBuf,
+        /// The network.
+        #[arg(long, value_enum)]
+        model: ModelKind,
+        /// Training pairs N.
+        #[arg(long)]
+        train_pairs: usize,
+        /// "+ image transformations": add all 8 rotations of the first N training pairs (0: off).
+        #[arg(long, default_value_t = 0)]
+        img_trans: usize,
+        /// Use centre crops in training instead of random crops.
+        #[arg(long)]
+        no_crop: bool,
+        /// The paper's network size (hidden 64, 128 px input) instead of the 2-core size.
+        #[arg(long)]
+        paper: bool,
+        /// Hidden size (default: 16, or 64 with --paper).
+        #[arg(long)]
+        hidden: Option<usize>,
+        /// Network input side after cropping: 16, 32, 64 or 128 (default: 64, or 128 with --paper).
+        #[arg(long)]
+        input: Option<usize>,
+        /// Validation pairs.
+        #[arg(long, default_value_t = 200)]
+        val_pairs: usize,
+        /// Test pairs.
+        #[arg(long, default_value_t = 200)]
+        test_pairs: usize,
+        /// Adam learning rate.
+        #[arg(long, default_value_t = 1e-4)]
+        lr: f64,
+        /// Mini-batch size.
+        #[arg(long, default_value_t = 64)]
+        batch: usize,
+        /// Epochs always run.
+        #[arg(long, default_value_t = 100)]
+        min_epochs: usize,
+        /// Stop after this many epochs without a better validation accuracy.
+        #[arg(long, default_value_t = 100)]
+        patience: usize,
+        /// At most this many epochs.
+        #[arg(long, default_value_t = 1000)]
+        max_epochs: usize,
+        /// Seed of the split, the weights, the batch order and the crops.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Output directory.
+        #[arg(short, long)]
+        out: PathBuf,
+    },
+    /// Write the table (rotest.md) and one figure per setting from every run.json below RUNS.
+    Report {
+        /// Directory searched recursively for run.json files.
+        runs: PathBuf,
+        /// Directory of datasets, one subdirectory per setting (named as `data -o` was given),
+        /// to draw each setting's invariant bound; optional.
+        #[arg(long)]
+        data: Option<PathBuf>,
+        /// Output directory.
+        #[arg(short, long, default_value = "docs/results")]
+        out: PathBuf,
+    },
+}
+
+/// Runs one subcommand, printing its results to stdout and progress to stderr.
+pub fn run(cmd: RotestCommand) -> Result<()> {
+    match cmd {
+        RotestCommand::Data { corrupt, pairs, seed, size, supersample, out } => {
+            let cfg = PairConfig { size, supersample, corruptions: Corruptions::parse(&corrupt)? };
+            let t0 = Instant::now();
+            let ds = generate(&cfg, pairs, seed)?;
+            let gen_s = t0.elapsed().as_secs_f64();
+            let path = ds.write(&out)?;
+            let bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+            println!(
+                "{}: {pairs} pairs of {size} px, setting {}, in {gen_s:.1} s ({:.1} pairs/s on {} threads), {:.1} MB",
+                path.display(),
+                cfg.corruptions.name(),
+                pairs as f64 / gen_s.max(1e-9),
+                rayon::current_num_threads(),
+                bytes as f64 / 1e6
+            );
+        }
+        RotestCommand::Snapshots { pairs, seed, size, out } => {
+            for s in PAPER_SETTINGS {
+                let c = Corruptions::parse(s)?;
+                let ds = generate(&PairConfig { size, supersample: 2, corruptions: c.clone() }, pairs.max(1), seed)?;
+                let p = write_snapshot(&ds, pairs, &out, &setting_file_stem(&c))?;
+                let labels: Vec<String> =
+                    ds.header.pairs.iter().map(|m| format!("idx {} label {}", m.idx, m.label)).collect();
+                println!("{}: {}", p.display(), labels.join("; "));
+            }
+        }
+        RotestCommand::Bound { data } => {
+            let h = Dataset::read_header(&data)?;
+            let b = dataset_bound(&h.pairs, &Corruptions::parse(&h.corrupt)?);
+            println!("setting {}: {} pairs", h.corrupt, b.pairs);
+            println!("bound (rotation uniform over the 8 angles, as generated): {:.4}", b.uniform_rotation);
+            println!("bound (the rotations this dataset drew):                 {:.4}", b.drawn);
+        }
+        RotestCommand::Train {
+            data,
+            model,
+            train_pairs,
+            img_trans,
+            no_crop,
+            paper,
+            hidden,
+            input,
+            val_pairs,
+            test_pairs,
+            lr,
+            batch,
+            min_epochs,
+            patience,
+            max_epochs,
+            seed,
+            out,
+        } => {
+            let mut cfg = TrainConfig::paper(model, train_pairs, seed);
+            cfg.hidden = hidden.unwrap_or(if paper { 64 } else { 16 });
+            cfg.input = input.unwrap_or(if paper { 128 } else { 64 });
+            cfg.val_pairs = val_pairs;
+            cfg.test_pairs = test_pairs;
+            cfg.img_trans = img_trans;
+            cfg.crop = !no_crop;
+            cfg.lr = lr;
+            cfg.batch = batch;
+            cfg.min_epochs = min_epochs;
+            cfg.patience = patience;
+            cfg.max_epochs = max_epochs;
+            cfg.validate()?;
+            let ds = Dataset::read(&data, None)?;
+            let mut log = |e: &crate::train::EpochRecord| {
+                eprintln!(
+                    "epoch {:4}  loss {:.4}  train {:.3}  val {:.3}  test {:.3}  {:.1} s",
+                    e.epoch, e.loss, e.train_acc, e.val_acc, e.test_acc, e.seconds
+                );
+            };
+            let r = crate::train::run(&ds, &cfg, &out, &mut log)?;
+            let secs: f64 = r.history.iter().map(|e| e.seconds).sum();
+            println!(
+                "{} {:?} N={} seed {}: test accuracy {:.4} at best validation epoch {} (val {:.4}); {} epochs, {:.1} s/epoch",
+                r.corrupt,
+                r.config.model,
+                r.config.train_pairs,
+                r.config.seed,
+                r.test_acc,
+                r.best_epoch,
+                r.best_val_acc,
+                r.history.len(),
+                secs / r.history.len().max(1) as f64
+            );
+        }
+        RotestCommand::Report { runs, data, out } => {
+            let mut bounds = BTreeMap::new();
+            if let Some(root) = data {
+                for s in PAPER_SETTINGS {
+                    let c = Corruptions::parse(s)?;
+                    let dir = root.join(setting_file_stem(&c));
+                    if dir.join(crate::dataset::FILE_NAME).is_file() {
+                        let h = Dataset::read_header(&dir)?;
+                        bounds.insert(c.name(), dataset_bound(&h.pairs, &c).uniform_rotation);
+                    }
+                }
+            }
+            for f in crate::report::write(&runs, &out, &bounds)? {
+                println!("{}", f.display());
+            }
+        }
+    }
+    Ok(())
+}
