@@ -63,7 +63,7 @@ pub enum RotestCommand {
     },
     /// Train and evaluate one network on one dataset: OUT/run.json and OUT/best.safetensors.
     #[command(
-        after_help = "Example (2-core size):\n  equiarm rotest train --data data/rotest/none --model equi --train-pairs 400 --seed 0 -o runs/none/equi/400/s0"
+        after_help = "Examples:\n  equiarm rotest train --data data/rotest/none --model equi --train-pairs 400 --seed 0 -o runs/none/equi/400/s0\n  equiarm rotest train --data data/rotest/none --model cnn --train-pairs 400 --img-trans 400 -o runs/none/cnn+trans/400/s0\n  equiarm rotest train --paper --device cuda --data data/rotest/none --model equi --train-pairs 1600 -o runs/paper/none/equi/1600/s0"
     )]
     Train {
         /// Dataset directory (or its pairs.rotest file).
@@ -114,9 +114,21 @@ pub enum RotestCommand {
         /// Seed of the split, the weights, the batch order and the crops.
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Device: `cpu`, or `cuda` / `cuda:N` in a binary built with `--features cuda`.
+        #[arg(long, default_value = "cpu")]
+        device: String,
         /// Output directory.
         #[arg(short, long)]
         out: PathBuf,
+    },
+    /// Evaluate a finished run's best weights on its test split with both images rotated by k·45°:
+    /// the fraction of predictions unchanged, and the accuracy, for each k.
+    Invariance {
+        /// The dataset the run was trained on.
+        #[arg(long)]
+        data: PathBuf,
+        /// The run directory (run.json and best.safetensors).
+        run: PathBuf,
     },
     /// Write the table (rotest.md) and one figure per setting from every run.json below RUNS.
     Report {
@@ -185,6 +197,7 @@ pub fn run(cmd: RotestCommand) -> Result<()> {
             patience,
             max_epochs,
             seed,
+            device,
             out,
         } => {
             let mut cfg = TrainConfig::paper(model, train_pairs, seed);
@@ -200,6 +213,7 @@ pub fn run(cmd: RotestCommand) -> Result<()> {
             cfg.patience = patience;
             cfg.max_epochs = max_epochs;
             cfg.validate()?;
+            let device = equiarm_nn::device::open(&device)?;
             let ds = Dataset::read(&data, None)?;
             let mut log = |e: &crate::train::EpochRecord| {
                 eprintln!(
@@ -207,7 +221,7 @@ pub fn run(cmd: RotestCommand) -> Result<()> {
                     e.epoch, e.loss, e.train_acc, e.val_acc, e.test_acc, e.seconds
                 );
             };
-            let r = crate::train::run(&ds, &cfg, &out, &mut log)?;
+            let r = crate::train::run(&ds, &cfg, &device, &out, &mut log)?;
             let secs: f64 = r.history.iter().map(|e| e.seconds).sum();
             println!(
                 "{} {:?} N={} seed {}: test accuracy {:.4} at best validation epoch {} (val {:.4}); {} epochs, {:.1} s/epoch",
@@ -221,6 +235,17 @@ pub fn run(cmd: RotestCommand) -> Result<()> {
                 r.history.len(),
                 secs / r.history.len().max(1) as f64
             );
+        }
+        RotestCommand::Invariance { data, run } => {
+            let ds = Dataset::read(&data, None)?;
+            let (rec, res) = crate::train::run_agreement(&ds, &run, &equiarm_nn::device::cpu())?;
+            println!(
+                "{} {:?} N={} seed {}: {} test pairs",
+                rec.corrupt, rec.config.model, rec.config.train_pairs, rec.config.seed, rec.config.test_pairs
+            );
+            for (k, (agree, acc)) in res.iter().enumerate() {
+                println!("rotation {:3}°: prediction unchanged {:.3}, accuracy {:.3}", 45 * k, agree, acc);
+            }
         }
         RotestCommand::Report { runs, data, out } => {
             let mut bounds = BTreeMap::new();

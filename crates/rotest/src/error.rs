@@ -37,6 +37,9 @@ pub enum RotestError {
     /// A network could not be built.
     #[error(transparent)]
     Net(#[from] equiarm_nn::nets::NetError),
+    /// The device cannot be used.
+    #[error(transparent)]
+    Device(#[from] equiarm_nn::device::DeviceError),
     /// Saving or loading network weights failed.
     #[error(transparent)]
     Checkpoint(#[from] equiarm_nn::checkpoint::CheckpointError),

@@ -373,6 +373,59 @@ pub fn accuracy<M: Classifier>(model: &M, s: &Samples, input: usize, batch: usiz
     right as f64 / s.len().max(1) as f64
 }
 
+/// Agreement under rotation: for each k = 1…7, the fraction of the samples of `s` whose predicted
+/// class is the same after rotating both images by k·45° (before the centre crop; see [`rotate`]),
+/// and the accuracy on the rotated samples. Index 0 holds the unrotated accuracy (agreement 1).
+pub fn rotation_agreement<M: Classifier>(model: &M, s: &Samples, input: usize, device: &Device) -> [(f64, f64); 8] {
+    let all: Vec<usize> = (0..s.len()).collect();
+    let off = (s.side - input) / 2;
+    let predict = |t: &Samples| -> Vec<usize> {
+        all.chunks(64)
+            .flat_map(|c| argmax_rows(model.logits(t.batch(c, &vec![(off, off); c.len()], input, device))))
+            .collect()
+    };
+    let base = predict(s);
+    let acc =
+        |p: &[usize]| p.iter().zip(&s.y).filter(|(a, b)| **a == **b as usize).count() as f64 / s.len().max(1) as f64;
+    std::array::from_fn(|k| {
+        if k == 0 {
+            return (1.0, acc(&base));
+        }
+        let n = CHANNELS * s.side * s.side;
+        let x: Vec<f32> = (0..s.len()).flat_map(|i| rotate(&s.x[i * n..(i + 1) * n], CHANNELS, s.side, k)).collect();
+        let rotated = Samples { side: s.side, x, y: s.y.clone() };
+        let p = predict(&rotated);
+        let agree = p.iter().zip(&base).filter(|(a, b)| a == b).count() as f64 / s.len().max(1) as f64;
+        (agree, acc(&p))
+    })
+}
+
+/// The test split of a finished run and its best weights, evaluated by [`rotation_agreement`].
+pub fn run_agreement(ds: &Dataset, run_dir: &Path, device: &Device) -> Result<(RunRecord, [(f64, f64); 8])> {
+    let path = run_dir.join("run.json");
+    let text = std::fs::read(&path).map_err(io(&path))?;
+    let rec: RunRecord = serde_json::from_slice(&text)
+        .map_err(|e| RotestError::Format { path: path.clone(), message: format!("not a run file: {e}") })?;
+    let cfg = &rec.config;
+    cfg.validate()?;
+    let [_, _, te] = split(ds.len(), cfg)?;
+    let test = Samples::from_dataset(ds, &te, cfg.full_side())?;
+    let ncfg = net_config(cfg);
+    let init = Init::new(cfg.seed);
+    let weights = run_dir.join("best.safetensors");
+    let res = match cfg.model {
+        ModelKind::Equi => {
+            let m = equiarm_nn::checkpoint::load(RotEquiNet::new(&ncfg, &init, device)?, &weights)?;
+            rotation_agreement(&m, &test, cfg.input, device)
+        }
+        ModelKind::Cnn => {
+            let m = equiarm_nn::checkpoint::load(RotCnnNet::new(&ncfg, &init, device)?, &weights)?;
+            rotation_agreement(&m, &test, cfg.input, device)
+        }
+    };
+    Ok((rec, res))
+}
+
 /// The index of the largest value of each row (the first, on ties).
 pub fn argmax_rows(logits: Tensor<2>) -> Vec<usize> {
     let [_, c] = logits.dims();
@@ -462,10 +515,17 @@ fn net_config(cfg: &TrainConfig) -> NetConfig {
     NetConfig { hidden: cfg.hidden, input_size: cfg.input, in_channels: CHANNELS }
 }
 
-/// The whole run: split `ds`, prepare the samples (with the image-transformation copies), build
-/// the network from `cfg.seed`, [`fit`], write `out/run.json` and the best weights
+/// The whole run on `device` (a plain device, e.g. from `equiarm_nn::device::open`; autodiff is
+/// added here): split `ds`, prepare the samples (with the image-transformation copies), build the
+/// network from `cfg.seed`, [`fit`], write `out/run.json` and the best weights
 /// `out/best.safetensors`. Returns the record.
-pub fn run(ds: &Dataset, cfg: &TrainConfig, out: &Path, on_epoch: &mut dyn FnMut(&EpochRecord)) -> Result<RunRecord> {
+pub fn run(
+    ds: &Dataset,
+    cfg: &TrainConfig,
+    device: &Device,
+    out: &Path,
+    on_epoch: &mut dyn FnMut(&EpochRecord),
+) -> Result<RunRecord> {
     cfg.validate()?;
     let [tr, va, te] = split(ds.len(), cfg)?;
     let side = cfg.full_side();
@@ -474,7 +534,7 @@ pub fn run(ds: &Dataset, cfg: &TrainConfig, out: &Path, on_epoch: &mut dyn FnMut
     let val = Samples::from_dataset(ds, &va, side)?;
     let test = Samples::from_dataset(ds, &te, side)?;
     std::fs::create_dir_all(out).map_err(io(out))?;
-    let device = Device::flex().autodiff();
+    let device = device.clone().autodiff();
     let init = Init::new(cfg.seed);
     let ncfg = net_config(cfg);
     let weights = out.join("best.safetensors");

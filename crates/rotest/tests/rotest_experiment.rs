@@ -141,7 +141,7 @@ fn a_trained_c8_net_predicts_the_same_class_for_both_images_rotated_by_90_degree
         lr: 1e-3,
         ..TrainConfig::paper(ModelKind::Equi, 16, 0)
     };
-    let rec = train::run(&ds, &cfg, &out, &mut |_| {}).unwrap();
+    let rec = train::run(&ds, &cfg, &Device::flex(), &out, &mut |_| {}).unwrap();
     assert_eq!(rec.history.len(), 2);
     assert!(rec.history.iter().all(|e| e.loss.is_finite()));
     let saved: train::RunRecord = serde_json::from_slice(&std::fs::read(out.join("run.json")).unwrap()).unwrap();
