@@ -7,13 +7,12 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum RotestError {
     /// Reading or writing a file or directory failed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// The file or directory.
         path: PathBuf,
-        /// The I/O error.
-        #[source]
-        source: std::io::Error,
+        /// The I/O error (in the message, not chained as a source, so it is printed once).
+        error: std::io::Error,
     },
     /// A file is not what it should be (not a dataset, a damaged chunk, a bad run file...).
     #[error("{path}: {message}")]
@@ -58,5 +57,5 @@ pub type Result<T, E = RotestError> = std::result::Result<T, E>;
 
 /// Maps an I/O error on `path` to [`RotestError::Io`].
 pub(crate) fn io(path: &std::path::Path) -> impl FnOnce(std::io::Error) -> RotestError + '_ {
-    move |source| RotestError::Io { path: path.to_path_buf(), source }
+    move |error| RotestError::Io { path: path.to_path_buf(), error }
 }

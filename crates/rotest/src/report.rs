@@ -117,7 +117,7 @@ fn register_font() -> bool {
     })
 }
 
-/// One PNG: accuracy (%) against training pairs for each variant of `setting`, error bars of one
+/// One PNG: accuracy (%) against training pairs (log scale) for each variant of `setting`, error bars of one
 /// s.e.; `bound` (if below 1) as a dashed line.
 pub fn figure(
     path: &Path,
@@ -135,17 +135,21 @@ pub fn figure(
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         let ns: Vec<usize> = by_var.values().flat_map(|m| m.keys().copied()).collect();
         let (lo, hi) = (ns.iter().copied().min().unwrap_or(1) as f64, ns.iter().copied().max().unwrap_or(1) as f64);
-        let (x0, x1) = if hi > lo { (lo, hi) } else { (lo - 1.0, hi + 1.0) };
+        // Logarithmic N axis with a margin of 20 % on both sides (N = 100, 400, 1600 evenly spaced).
+        let (x0, x1) = (lo.max(1.0) / 1.25, hi.max(1.0) * 1.25);
         let mut chart = ChartBuilder::on(&root)
             .caption(format!("rotation estimation: {setting}"), ("sans-serif", 20))
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(50)
-            .build_cartesian_2d(x0..x1, 0f64..100f64)
+            .build_cartesian_2d((x0..x1).log_scale(), 0f64..100f64)
             .map_err(|e| err(e.to_string()))?;
         chart
             .configure_mesh()
-            .x_desc("training pairs N")
+            .light_line_style(WHITE)
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .y_label_formatter(&|y| format!("{y:.0}"))
+            .x_desc("training pairs N (log scale)")
             .y_desc("test accuracy (%)")
             .draw()
             .map_err(|e| err(e.to_string()))?;
@@ -177,13 +181,13 @@ pub fn figure(
         }
         if let Some(b) = bound.filter(|b| *b < 1.0) {
             let y = 100.0 * b;
-            // dashed: 40 segments with gaps
-            let step = (x1 - x0) / 80.0;
+            // dashed: 40 dashes, evenly spaced on the log axis
+            let at = |t: f64| x0 * (x1 / x0).powf(t / 80.0);
             chart
-                .draw_series((0..40).map(|k| {
-                    let a = x0 + 2.0 * k as f64 * step;
-                    PathElement::new(vec![(a, y), (a + step, y)], BLACK)
-                }))
+                .draw_series(
+                    (0..40)
+                        .map(|k| PathElement::new(vec![(at(2.0 * k as f64), y), (at(2.0 * k as f64 + 1.0), y)], BLACK)),
+                )
                 .map_err(|e| err(e.to_string()))?;
             chart
                 .draw_series(std::iter::once(PathElement::new(vec![(x0, y), (x0, y)], BLACK)))
@@ -239,6 +243,54 @@ pub fn write(runs_dir: &Path, out: &Path, bounds: &BTreeMap<String, f64>) -> Res
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::train::{EpochRecord, TrainConfig};
+
+    fn record(model: ModelKind, n: usize, img_trans: usize, seed: u64, acc: f64) -> RunRecord {
+        let mut config = TrainConfig::paper(model, n, seed);
+        config.img_trans = img_trans;
+        let e = EpochRecord { epoch: 1, loss: 1.0, train_acc: acc, val_acc: acc, test_acc: acc, seconds: 1.0 };
+        RunRecord {
+            config,
+            corrupt: "condition_reverse".into(),
+            data_seed: 0,
+            history: vec![e],
+            best_epoch: 1,
+            best_val_acc: acc,
+            test_acc: acc,
+            train_samples: n,
+        }
+    }
+
+    /// Run files in nested directories are found, grouped by variant and N, and averaged; the
+    /// table and the figure are written; an empty directory is an error naming it.
+    #[test]
+    fn report_groups_runs_and_writes_table_and_figure() {
+        let root = std::env::temp_dir().join(format!("equiarm_rotest_report_{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let runs = [
+            ("equi/100/s0", record(ModelKind::Equi, 100, 0, 0, 0.5)),
+            ("equi/100/s1", record(ModelKind::Equi, 100, 0, 1, 0.6)),
+            ("cnn/100/s0", record(ModelKind::Cnn, 100, 0, 0, 0.7)),
+            ("cnn+trans/400/s0", record(ModelKind::Cnn, 400, 400, 0, 0.8)),
+        ];
+        for (dir, r) in &runs {
+            let d = root.join("runs").join(dir);
+            std::fs::create_dir_all(&d).unwrap();
+            std::fs::write(d.join("run.json"), serde_json::to_vec(r).unwrap()).unwrap();
+        }
+        let out = root.join("out");
+        let bounds = BTreeMap::from([("condition_reverse".to_string(), 0.625)]);
+        let files = write(&root.join("runs"), &out, &bounds).unwrap();
+        assert_eq!(files.len(), 2);
+        let md = std::fs::read_to_string(out.join("rotest.md")).unwrap();
+        assert!(md.contains("| condition_reverse | 100 | 70.0 ± 0.0 (1) | – | 55.0 ± 5.0 (2) |"), "{md}");
+        assert!(md.contains("| condition_reverse | 400 | – | 80.0 ± 0.0 (1) | – |"), "{md}");
+        assert!(image::open(out.join("rotest_condition_reverse.png")).is_ok());
+        std::fs::create_dir_all(root.join("empty")).unwrap();
+        let e = write(&root.join("empty"), &out, &bounds).unwrap_err().to_string();
+        assert!(e.contains("no run.json") && e.contains("empty"), "{e}");
+        let _ = std::fs::remove_dir_all(&root);
+    }
 
     #[test]
     fn mean_and_standard_error() {

@@ -571,6 +571,48 @@ pub fn agreement(a: &Frame, b: &Frame) -> (f64, f32) {
 mod tests {
     use super::*;
 
+    /// A 10 cm box on the table seen from above, lit from the side: with shadows, ground pixels on
+    /// the far side of the box from the light turn to the ambient colour; the default options give
+    /// exactly what `rasterize` gives.
+    #[test]
+    fn shadows_darken_the_ground_behind_a_box_and_default_options_change_nothing() {
+        let assets = crate::Assets::bundled().unwrap();
+        let mut scene = Scene::new(&crate::SimParams::default(), &assets, false).unwrap();
+        scene.add_marker(
+            "box",
+            Pose::from_translation(Vector::new(0.45, 0.0, 0.05)),
+            Vector::new(0.05, 0.05, 0.05),
+            [0.5, 0.5, 0.5],
+        );
+        scene.step();
+        let cam = crate::camera::Camera::new(crate::camera::CameraConfig {
+            elevation_deg: 90.0,
+            distance: 1.0,
+            width: 64,
+            height: 64,
+            ..Default::default()
+        })
+        .unwrap();
+        let meshes = MeshCache::new(&scene);
+        let render = |o: &RenderOptions| {
+            let mut f = Frame::new(64, 64, 3.0);
+            rasterize_with(&scene, &meshes, &cam, o, &mut f);
+            f
+        };
+        let mut plain = Frame::new(64, 64, 3.0);
+        rasterize(&scene, &meshes, &cam, &mut plain);
+        assert_eq!(render(&RenderOptions::default()), plain);
+        // light from −y (low): the shadow falls toward +y, i.e. to the right of the box
+        let lit = RenderOptions { light_dir: [0.0, -1.0, 0.5], ..RenderOptions::default() };
+        let shadowed = RenderOptions { shadows: true, ..lit.clone() };
+        let (a, b) = (render(&lit), render(&shadowed));
+        assert_eq!(a.depth, b.depth);
+        let table = |f: &Frame, row: usize, col: usize| f.color[(row * 64 + col) * 3];
+        // row 32 crosses the box (columns ~27..37 at this field of view); column 45 is beside it on +y
+        assert!(table(&b, 32, 45) < table(&a, 32, 45), "shadow right of the box");
+        assert_eq!(table(&b, 32, 15), table(&a, 32, 15), "no shadow on the lit side");
+    }
+
     #[test]
     fn crop_takes_the_window() {
         let mut f = Frame::new(4, 3, 1.0);
