@@ -41,7 +41,7 @@ pub enum RotestCommand {
         #[arg(short, long)]
         out: PathBuf,
     },
-    /// Write snapshot PNGs of the first pairs of each of the 15 settings: OUT/<setting>.png.
+    /// Write snapshot PNGs of the first pairs of each of the 15 settings: `OUT/<setting>.png`.
     Snapshots {
         /// Pairs per setting (rows of each PNG).
         #[arg(long, default_value_t = 2)]
