@@ -153,31 +153,21 @@ pub fn render(rs: &RotScene, cfg: &PairConfig, light_color: [f32; 3]) -> Result<
         }
         left
     };
-    let mut frame = if c.has(Corruption::TwoLightColor) {
-        let mut a = opts.clone();
-        a.light_color = [1.0, 0.2, 0.2];
-        let mut b = opts.clone();
-        b.light_color = [0.2, 0.2, 1.0];
-        halves(a, b)
+    // The two halves' settings: light colour (two_light_color) and specular (two_specular).
+    let (mut left, mut right) = (opts.clone(), opts.clone());
+    if c.has(Corruption::TwoLightColor) {
+        left.light_color = [1.0, 0.2, 0.2];
+        right.light_color = [0.2, 0.2, 1.0];
+    }
+    if c.has(Corruption::TwoSpecular) {
+        left.specular = 0.0;
+        right.specular = 0.2;
+    }
+    let frame = if c.has(Corruption::TwoLightColor) || c.has(Corruption::TwoSpecular) {
+        halves(left, right)
     } else {
         draw(&opts)
     };
-    if c.has(Corruption::TwoSpecular) {
-        let mut a = opts.clone();
-        a.specular = 0.0;
-        let mut b = opts.clone();
-        b.specular = 0.2;
-        if c.has(Corruption::TwoLightColor) {
-            // Both halves already differ by colour; redo each half with its specular too.
-            let mut al = a.clone();
-            al.light_color = [1.0, 0.2, 0.2];
-            let mut br = b.clone();
-            br.light_color = [0.2, 0.2, 1.0];
-            frame = halves(al, br);
-        } else {
-            frame = halves(a, b);
-        }
-    }
     let mut img = RgbdImage::downsample(&frame, cfg.size);
     if c.has(Corruption::Reflect) {
         img.reflect();
