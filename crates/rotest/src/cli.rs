@@ -88,9 +88,9 @@ pub enum RotestCommand {
         #[arg(short, long)]
         out: PathBuf,
     },
-    /// Run the experiment: for each setting, generate its dataset if DATA/<setting> has none, then
+    /// Run the experiment: for each setting, generate its dataset if `DATA/<setting>` has none, then
     /// train Equi, CNN and CNN + image transformations (img-trans = N) for each N and seed whose
-    /// RUNS/<setting>/<variant>/<N>/s<seed>/run.json does not exist yet (so an interrupted grid
+    /// `RUNS/<setting>/<variant>/<N>/s<seed>/run.json` does not exist yet (so an interrupted grid
     /// continues where it stopped), then write the report.
     #[command(
         after_help = "Example (a short schedule for 2 cores):\n  equiarm rotest grid --data data/rotest --runs runs/rotest --sizes 100,400 --seeds 0,1,2,3 --lr 1e-3 --min-epochs 20 --patience 20 --max-epochs 100"
