@@ -570,3 +570,56 @@ pub fn run(
     std::fs::write(&path, json).map_err(io(&path))?;
     Ok(record)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dataset::{Header, StoredImage, StoredPair};
+    use equiarm_sim::rotest::{DuckPose, PairMeta};
+    use half::f16;
+
+    /// A 4 px pair whose pixel (r, c) has colour (r, c, 10·k) for image k and depth 0.9 + 0.01·(r + c).
+    fn tiny() -> Dataset {
+        let img = |k: u8| StoredImage {
+            color: (0..16).flat_map(|i| [(i / 4) as u8, (i % 4) as u8, 10 * k]).collect(),
+            depth: (0..16).map(|i| f16::from_f32(0.9 + 0.01 * ((i / 4) + (i % 4)) as f32)).collect(),
+        };
+        let pose = DuckPose { x: 0.45, y: 0.0, z: 0.0, yaw: 0.0 };
+        let meta = PairMeta { idx: 3, label: 5, before: [pose; 3], after: [pose; 3], light_color: [1.0; 3] };
+        Dataset {
+            header: Header {
+                size: 4,
+                supersample: 1,
+                corrupt: "none".into(),
+                seed: 0,
+                pairs: vec![meta],
+                chunks: vec![],
+            },
+            pairs: vec![StoredPair { before: img(1), after: img(2) }],
+        }
+    }
+
+    #[test]
+    fn samples_stack_rgbd_of_both_images_area_averaged_and_batches_crop() {
+        let ds = tiny();
+        let s = Samples::from_dataset(&ds, &[0], 2).unwrap();
+        assert_eq!((s.side, s.len(), s.y[0]), (2, 1, 5));
+        let at = |ch: usize, r: usize, c: usize| s.x[ch * 4 + r * 2 + c];
+        // R channel = row index averaged over the 2×2 block, /255: rows 0,1 → 0.5; rows 2,3 → 2.5
+        assert!((at(0, 0, 1) - 0.5 / 255.0).abs() < 1e-7 && (at(0, 1, 0) - 2.5 / 255.0).abs() < 1e-7);
+        // G channel = column index
+        assert!((at(1, 1, 0) - 0.5 / 255.0).abs() < 1e-7 && (at(1, 0, 1) - 2.5 / 255.0).abs() < 1e-7);
+        // B channel tells the images apart: 10 for image 1 (channel 2), 20 for image 2 (channel 6)
+        assert!((at(2, 0, 0) - 10.0 / 255.0).abs() < 1e-7 && (at(6, 0, 0) - 20.0 / 255.0).abs() < 1e-7);
+        // depth channel: block (0, 0) averages depths 0.90, 0.91, 0.91, 0.92 → (1 − 0.91)·5 = 0.45
+        assert!((at(3, 0, 0) - 0.45).abs() < 2e-3, "{}", at(3, 0, 0));
+        assert_eq!(at(7, 1, 1), at(3, 1, 1));
+        assert!(Samples::from_dataset(&ds, &[0], 3).unwrap_err().to_string().contains("--input"));
+        // a 1 px crop at (1, 0) of every channel
+        let full = Samples::from_dataset(&ds, &[0], 4).unwrap();
+        let b = full.batch(&[0], &[(1, 0)], 1, &Device::flex());
+        let v = b.into_data().try_to_vec::<f32>().unwrap();
+        assert_eq!(v.len(), 8);
+        assert!((v[0] - 1.0 / 255.0).abs() < 1e-7 && v[1] == 0.0, "{v:?}");
+    }
+}
