@@ -282,7 +282,9 @@ pub fn run(cmd: RotestCommand) -> Result<()> {
         RotestCommand::Train { data, model, train_pairs, img_trans, seed, opts, out } => {
             let cfg = opts.config(model, train_pairs, img_trans, seed)?;
             let device = equiarm_nn::device::open(&opts.device)?;
+            let t0 = Instant::now();
             let ds = Dataset::read(&data, None)?;
+            eprintln!("{} pairs of {} px read in {:.2} s", ds.len(), ds.header.size, t0.elapsed().as_secs_f64());
             let r = crate::train::run(&ds, &cfg, &device, &out, &mut print_epoch)?;
             println!("{}", summary(&r));
         }
