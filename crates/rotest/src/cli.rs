@@ -129,6 +129,10 @@ pub enum RotestCommand {
         data: PathBuf,
         /// The run directory (run.json and best.safetensors).
         run: PathBuf,
+        /// Also evaluate with every image masked to the disc inscribed in the crop, so that 45°
+        /// rotations bring in no zero-filled corners.
+        #[arg(long)]
+        disc: bool,
     },
     /// Write the table (rotest.md) and one figure per setting from every run.json below RUNS.
     Report {
@@ -334,15 +338,21 @@ pub fn run(cmd: RotestCommand) -> Result<()> {
                 println!("{}", f.display());
             }
         }
-        RotestCommand::Invariance { data, run } => {
+        RotestCommand::Invariance { data, run, disc } => {
             let ds = Dataset::read(&data, None)?;
-            let (rec, res) = crate::train::run_agreement(&ds, &run, &equiarm_nn::device::cpu())?;
+            let cpu = equiarm_nn::device::cpu();
+            let (rec, res) = crate::train::run_agreement(&ds, &run, &cpu, false)?;
+            let masked = if disc { Some(crate::train::run_agreement(&ds, &run, &cpu, true)?.1) } else { None };
             println!(
                 "{} {:?} N={} seed {}: {} test pairs",
                 rec.corrupt, rec.config.model, rec.config.train_pairs, rec.config.seed, rec.config.test_pairs
             );
             for (k, (agree, acc)) in res.iter().enumerate() {
-                println!("rotation {:3}°: prediction unchanged {:.3}, accuracy {:.3}", 45 * k, agree, acc);
+                let extra = masked
+                    .as_ref()
+                    .map(|m| format!("; disc-masked: unchanged {:.3}, accuracy {:.3}", m[k].0, m[k].1))
+                    .unwrap_or_default();
+                println!("rotation {:3}°: prediction unchanged {agree:.3}, accuracy {acc:.3}{extra}", 45 * k);
             }
         }
         RotestCommand::Report { runs, data, out } => {

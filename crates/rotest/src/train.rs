@@ -187,6 +187,13 @@ impl Samples {
 
     /// The pairs `indices` of `ds`, area-downsampled to `side` (which must divide the stored size).
     pub fn from_dataset(ds: &Dataset, indices: &[usize], side: usize) -> Result<Self> {
+        Self::from_dataset_rotated(ds, indices, side, 0)
+    }
+
+    /// The pairs `indices` of `ds` with both images rotated by `k`·45° ([`rotate`]) at the stored
+    /// resolution, then area-downsampled to `side` (which must divide the stored size). `k` = 0 is
+    /// [`Samples::from_dataset`].
+    pub fn from_dataset_rotated(ds: &Dataset, indices: &[usize], side: usize, k: usize) -> Result<Self> {
         let s = ds.header.size;
         if side == 0 || !s.is_multiple_of(side) {
             return Err(RotestError::Config {
@@ -203,39 +210,61 @@ impl Samples {
         let mut y = Vec::with_capacity(indices.len());
         for &i in indices {
             let p = &ds.pairs[i];
+            // The 8 planes at the stored resolution.
+            let mut full = Vec::with_capacity(CHANNELS * s * s);
             for img in [&p.before, &p.after] {
-                let mut planes = vec![0f32; 4 * side * side];
+                for ch in 0..3 {
+                    full.extend(img.color.chunks_exact(3).map(|px| px[ch] as f32 / 255.0));
+                }
+                full.extend(img.depth.iter().map(|d| depth_channel(d.to_f32())));
+            }
+            if !k.is_multiple_of(8) {
+                full = rotate(&full, CHANNELS, s, k);
+            }
+            for plane in full.chunks_exact(s * s) {
+                let mut small = vec![0f32; side * side];
                 for r in 0..s {
                     for c in 0..s {
-                        let o = (r / f) * side + c / f;
-                        let j = r * s + c;
-                        for k in 0..3 {
-                            planes[k * side * side + o] += img.color[j * 3 + k] as f32 / 255.0;
-                        }
-                        planes[3 * side * side + o] += depth_channel(img.depth[j].to_f32());
+                        small[(r / f) * side + c / f] += plane[r * s + c];
                     }
                 }
-                x.extend(planes.iter().map(|v| v / area));
+                x.extend(small.iter().map(|v| v / area));
             }
             y.push(ds.header.pairs[i].label);
         }
         Ok(Self { side, x, y })
     }
 
-    /// Appends the rotations by k·45°, k = 1..8, of samples `0..count` (label unchanged): rotations by
-    /// multiples of 90° permute pixels exactly, the others interpolate bilinearly with zero fill.
-    pub fn add_rotations(&mut self, count: usize) {
-        let n = CHANNELS * self.side * self.side;
-        let mut extra = Vec::with_capacity(count * 7 * n);
-        let mut labels = Vec::with_capacity(count * 7);
-        for i in 0..count.min(self.len()) {
-            for k in 1..8 {
-                extra.extend(rotate(self.one(i), CHANNELS, self.side, k));
-                labels.push(self.y[i]);
+    /// Sets every pixel farther than `radius` pixels from the image centre to 0, in every channel.
+    /// With `radius` = half the crop, a centre crop of a sample rotated by 45° (whose corners are
+    /// zero-filled) and of the unrotated sample then show the same disc of the scene.
+    pub fn mask_disc(&mut self, radius: f32) {
+        let c = (self.side as f32 - 1.0) / 2.0;
+        let side = self.side;
+        let outside: Vec<usize> =
+            (0..side * side).filter(|i| ((i / side) as f32 - c).hypot((i % side) as f32 - c) > radius).collect();
+        for plane in self.x.chunks_exact_mut(side * side) {
+            for &i in &outside {
+                plane[i] = 0.0;
             }
         }
-        self.x.extend(extra);
-        self.y.extend(labels);
+    }
+
+    /// Appends `other`'s samples (of the same side).
+    pub fn extend(&mut self, other: Samples) {
+        debug_assert_eq!(self.side, other.side);
+        self.x.extend(other.x);
+        self.y.extend(other.y);
+    }
+
+    /// "+ image transformations": the rotations by k·45°, k = 1…7, of the pairs `indices` of `ds`
+    /// (both images, at the stored resolution, label unchanged), downsampled to `side`.
+    pub fn rotated_copies(ds: &Dataset, indices: &[usize], side: usize) -> Result<Self> {
+        let mut out = Samples { side, x: Vec::new(), y: Vec::new() };
+        for k in 1..8 {
+            out.extend(Self::from_dataset_rotated(ds, indices, side, k)?);
+        }
+        Ok(out)
     }
 
     /// A batch `[len, 8, size, size]` of `indices`, each cropped at its `(row, col)` offset.
@@ -373,35 +402,45 @@ pub fn accuracy<M: Classifier>(model: &M, s: &Samples, input: usize, batch: usiz
     right as f64 / s.len().max(1) as f64
 }
 
-/// Agreement under rotation: for each k = 1…7, the fraction of the samples of `s` whose predicted
-/// class is the same after rotating both images by k·45° (before the centre crop; see [`rotate`]),
-/// and the accuracy on the rotated samples. Index 0 holds the unrotated accuracy (agreement 1).
-pub fn rotation_agreement<M: Classifier>(model: &M, s: &Samples, input: usize, device: &Device) -> [(f64, f64); 8] {
-    let all: Vec<usize> = (0..s.len()).collect();
-    let off = (s.side - input) / 2;
+/// Agreement under rotation: `rotated[k]` holds the samples rotated by k·45° (k = 0…7, e.g. from
+/// [`Samples::from_dataset_rotated`]); for each k, the fraction of samples whose predicted class is
+/// the same as for `rotated[0]`, and the accuracy on `rotated[k]` (centre crops).
+pub fn rotation_agreement<M: Classifier>(
+    model: &M,
+    rotated: &[Samples],
+    input: usize,
+    device: &Device,
+) -> Vec<(f64, f64)> {
     let predict = |t: &Samples| -> Vec<usize> {
+        let off = (t.side - input) / 2;
+        let all: Vec<usize> = (0..t.len()).collect();
         all.chunks(64)
             .flat_map(|c| argmax_rows(model.logits(t.batch(c, &vec![(off, off); c.len()], input, device))))
             .collect()
     };
-    let base = predict(s);
-    let acc =
-        |p: &[usize]| p.iter().zip(&s.y).filter(|(a, b)| **a == **b as usize).count() as f64 / s.len().max(1) as f64;
-    std::array::from_fn(|k| {
-        if k == 0 {
-            return (1.0, acc(&base));
-        }
-        let n = CHANNELS * s.side * s.side;
-        let x: Vec<f32> = (0..s.len()).flat_map(|i| rotate(&s.x[i * n..(i + 1) * n], CHANNELS, s.side, k)).collect();
-        let rotated = Samples { side: s.side, x, y: s.y.clone() };
-        let p = predict(&rotated);
-        let agree = p.iter().zip(&base).filter(|(a, b)| a == b).count() as f64 / s.len().max(1) as f64;
-        (agree, acc(&p))
-    })
+    let Some(first) = rotated.first() else { return Vec::new() };
+    let base = predict(first);
+    let n = first.len().max(1) as f64;
+    rotated
+        .iter()
+        .map(|t| {
+            let p = predict(t);
+            let agree = p.iter().zip(&base).filter(|(a, b)| a == b).count() as f64 / n;
+            let acc = p.iter().zip(&t.y).filter(|(a, b)| **a == **b as usize).count() as f64 / n;
+            (agree, acc)
+        })
+        .collect()
 }
 
-/// The test split of a finished run and its best weights, evaluated by [`rotation_agreement`].
-pub fn run_agreement(ds: &Dataset, run_dir: &Path, device: &Device) -> Result<(RunRecord, [(f64, f64); 8])> {
+/// The test split of a finished run and its best weights, evaluated by [`rotation_agreement`]; with
+/// `disc`, every sample is first masked to the disc inscribed in the crop ([`Samples::mask_disc`]),
+/// so that 45° rotations add no zero-filled corners.
+pub fn run_agreement(
+    ds: &Dataset,
+    run_dir: &Path,
+    device: &Device,
+    disc: bool,
+) -> Result<(RunRecord, Vec<(f64, f64)>)> {
     let path = run_dir.join("run.json");
     let text = std::fs::read(&path).map_err(io(&path))?;
     let rec: RunRecord = serde_json::from_slice(&text)
@@ -409,18 +448,24 @@ pub fn run_agreement(ds: &Dataset, run_dir: &Path, device: &Device) -> Result<(R
     let cfg = &rec.config;
     cfg.validate()?;
     let [_, _, te] = split(ds.len(), cfg)?;
-    let test = Samples::from_dataset(ds, &te, cfg.full_side())?;
+    let mut rotated: Vec<Samples> =
+        (0..8).map(|k| Samples::from_dataset_rotated(ds, &te, cfg.full_side(), k)).collect::<Result<_>>()?;
+    if disc {
+        for r in &mut rotated {
+            r.mask_disc(cfg.input as f32 / 2.0);
+        }
+    }
     let ncfg = net_config(cfg);
     let init = Init::new(cfg.seed);
     let weights = run_dir.join("best.safetensors");
     let res = match cfg.model {
         ModelKind::Equi => {
             let m = equiarm_nn::checkpoint::load(RotEquiNet::new(&ncfg, &init, device)?, &weights)?;
-            rotation_agreement(&m, &test, cfg.input, device)
+            rotation_agreement(&m, &rotated, cfg.input, device)
         }
         ModelKind::Cnn => {
             let m = equiarm_nn::checkpoint::load(RotCnnNet::new(&ncfg, &init, device)?, &weights)?;
-            rotation_agreement(&m, &test, cfg.input, device)
+            rotation_agreement(&m, &rotated, cfg.input, device)
         }
     };
     Ok((rec, res))
@@ -530,7 +575,7 @@ pub fn run(
     let [tr, va, te] = split(ds.len(), cfg)?;
     let side = cfg.full_side();
     let mut train = Samples::from_dataset(ds, &tr, side)?;
-    train.add_rotations(cfg.img_trans);
+    train.extend(Samples::rotated_copies(ds, &tr[..cfg.img_trans], side)?);
     let val = Samples::from_dataset(ds, &va, side)?;
     let test = Samples::from_dataset(ds, &te, side)?;
     std::fs::create_dir_all(out).map_err(io(out))?;

@@ -95,7 +95,7 @@ fn training_options_out_of_their_domain_name_the_flag() {
 }
 
 #[test]
-fn rotations_by_90_are_exact_and_the_augmentation_adds_seven_copies() {
+fn rotations_by_90_are_exact_and_the_augmentation_adds_seven_copies_per_pair() {
     let side = 5;
     let img: Vec<f32> = (0..2 * side * side).map(|v| v as f32).collect();
     let mut x = img.clone();
@@ -110,11 +110,22 @@ fn rotations_by_90_are_exact_and_the_augmentation_adds_seven_copies() {
     let c = side * side / 2;
     let r45 = rotate(&rotate(&img, 2, side, 1), 2, side, 1);
     assert!((r45[c] - r[c]).abs() < 1e-4);
-    let ds = data("none", 19, 3, 4);
-    let mut s = Samples::from_dataset(&ds, &[0, 1, 2], 19).unwrap();
-    s.add_rotations(2);
-    assert_eq!(s.len(), 3 + 2 * 7);
-    assert_eq!(s.y[3..10], [s.y[0]; 7]);
+    // rotating at the stored resolution then downsampling by 2 equals downsampling then rotating
+    // (up to float rounding) for multiples of 90°
+    let ds = data("none", 38, 3, 4);
+    let small = Samples::from_dataset(&ds, &[0, 1, 2], 19).unwrap();
+    let n = 8 * 19 * 19;
+    for k in [2, 4, 6] {
+        let r = Samples::from_dataset_rotated(&ds, &[0, 1, 2], 19, k).unwrap();
+        for i in 0..3 {
+            let expect = rotate(&small.x[i * n..(i + 1) * n], 8, 19, k);
+            let err = expect.iter().zip(&r.x[i * n..(i + 1) * n]).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+            assert!(err < 1e-5, "k {k} pair {i}: {err}");
+        }
+    }
+    let copies = Samples::rotated_copies(&ds, &[0, 2], 19).unwrap();
+    assert_eq!(copies.len(), 2 * 7);
+    assert_eq!(copies.y, [small.y[0], small.y[2]].repeat(7));
 }
 
 fn rot90_batch(x: &Tensor<4>) -> Tensor<4> {
