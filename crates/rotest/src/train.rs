@@ -15,6 +15,7 @@ use equiarm_nn::nets::{NetConfig, RotCnnNet, RotEquiNet};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 
 use crate::dataset::Dataset;
 use crate::error::{Result, RotestError, io};
@@ -194,6 +195,15 @@ impl Samples {
     /// resolution, then area-downsampled to `side` (which must divide the stored size). `k` = 0 is
     /// [`Samples::from_dataset`].
     pub fn from_dataset_rotated(ds: &Dataset, indices: &[usize], side: usize, k: usize) -> Result<Self> {
+        let mut out = Samples { side, x: Vec::new(), y: Vec::new() };
+        out.append_from_dataset(ds, indices, k)?;
+        Ok(out)
+    }
+
+    /// Appends the pairs `indices` of `ds` rotated by `k`·45° as [`Samples::from_dataset_rotated`]
+    /// makes them (at this set's side), reserving the memory they need first.
+    pub fn append_from_dataset(&mut self, ds: &Dataset, indices: &[usize], k: usize) -> Result<()> {
+        let side = self.side;
         let s = ds.header.size;
         if side == 0 || !s.is_multiple_of(side) {
             return Err(RotestError::Config {
@@ -206,11 +216,9 @@ impl Samples {
         }
         let f = s / side;
         let area = (f * f) as f32;
-        let mut x = Vec::with_capacity(indices.len() * CHANNELS * side * side);
-        let mut y = Vec::with_capacity(indices.len());
-        for &i in indices {
+        // One pair: the 8 planes at the stored resolution, rotated, area-downsampled.
+        let one = |i: usize| -> Vec<f32> {
             let p = &ds.pairs[i];
-            // The 8 planes at the stored resolution.
             let mut full = Vec::with_capacity(CHANNELS * s * s);
             for img in [&p.before, &p.after] {
                 for ch in 0..3 {
@@ -221,6 +229,7 @@ impl Samples {
             if !k.is_multiple_of(8) {
                 full = rotate(&full, CHANNELS, s, k);
             }
+            let mut out = Vec::with_capacity(CHANNELS * side * side);
             for plane in full.chunks_exact(s * s) {
                 let mut small = vec![0f32; side * side];
                 for r in 0..s {
@@ -228,11 +237,21 @@ impl Samples {
                         small[(r / f) * side + c / f] += plane[r * s + c];
                     }
                 }
-                x.extend(small.iter().map(|v| v / area));
+                out.extend(small.iter().map(|v| v / area));
             }
-            y.push(ds.header.pairs[i].label);
+            out
+        };
+        self.x.reserve_exact(indices.len() * CHANNELS * side * side);
+        self.y.reserve_exact(indices.len());
+        // In parallel over pairs, in blocks of 256 to bound the memory held at once.
+        for block in indices.chunks(256) {
+            let done: Vec<Vec<f32>> = block.par_iter().map(|&i| one(i)).collect();
+            for (v, &i) in done.into_iter().zip(block) {
+                self.x.extend(v);
+                self.y.push(ds.header.pairs[i].label);
+            }
         }
-        Ok(Self { side, x, y })
+        Ok(())
     }
 
     /// Sets every pixel farther than `radius` pixels from the image centre to 0, in every channel.
@@ -261,10 +280,17 @@ impl Samples {
     /// (both images, at the stored resolution, label unchanged), downsampled to `side`.
     pub fn rotated_copies(ds: &Dataset, indices: &[usize], side: usize) -> Result<Self> {
         let mut out = Samples { side, x: Vec::new(), y: Vec::new() };
-        for k in 1..8 {
-            out.extend(Self::from_dataset_rotated(ds, indices, side, k)?);
-        }
+        out.append_rotated_copies(ds, indices)?;
         Ok(out)
+    }
+
+    /// Appends [`Samples::rotated_copies`] of `indices` to this set (one allocation).
+    pub fn append_rotated_copies(&mut self, ds: &Dataset, indices: &[usize]) -> Result<()> {
+        self.x.reserve_exact(7 * indices.len() * CHANNELS * self.side * self.side);
+        for k in 1..8 {
+            self.append_from_dataset(ds, indices, k)?;
+        }
+        Ok(())
     }
 
     /// A batch `[len, 8, size, size]` of `indices`, each cropped at its `(row, col)` offset.
@@ -575,7 +601,7 @@ pub fn run(
     let [tr, va, te] = split(ds.len(), cfg)?;
     let side = cfg.full_side();
     let mut train = Samples::from_dataset(ds, &tr, side)?;
-    train.extend(Samples::rotated_copies(ds, &tr[..cfg.img_trans], side)?);
+    train.append_rotated_copies(ds, &tr[..cfg.img_trans])?;
     let val = Samples::from_dataset(ds, &va, side)?;
     let test = Samples::from_dataset(ds, &te, side)?;
     std::fs::create_dir_all(out).map_err(io(out))?;
