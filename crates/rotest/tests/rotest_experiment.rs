@@ -197,3 +197,29 @@ fn a_trained_c8_net_predicts_the_same_class_for_both_images_rotated_by_90_degree
     let err = a.iter().zip(&b).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max) / scale;
     assert!(err > 1e-3, "a CNN is not invariant: {err}");
 }
+
+/// With a learning rate too small to change any prediction, validation accuracy never improves after
+/// epoch 1: training stops `patience` epochs later, but not before `min_epochs`, and reports the
+/// test accuracy of epoch 1.
+#[test]
+fn early_stopping_waits_for_patience_after_min_epochs_and_reports_the_best_epoch() {
+    let ds = data("none", 19, 16, 6);
+    for (min_epochs, expect) in [(2, 3), (5, 5)] {
+        let cfg = TrainConfig {
+            hidden: 8,
+            input: 16,
+            val_pairs: 4,
+            test_pairs: 4,
+            batch: 8,
+            lr: 1e-12,
+            min_epochs,
+            patience: 2,
+            max_epochs: 50,
+            ..TrainConfig::paper(ModelKind::Cnn, 8, 1)
+        };
+        let rec = train::run(&ds, &cfg, &Device::flex(), &scratch(&format!("stop{min_epochs}")), &mut |_| {}).unwrap();
+        assert_eq!(rec.history.len(), expect, "min_epochs {min_epochs}");
+        assert!(rec.history.iter().all(|e| e.val_acc == rec.history[0].val_acc));
+        assert_eq!((rec.best_epoch, rec.test_acc), (1, rec.history[0].test_acc));
+    }
+}
