@@ -68,6 +68,10 @@ enum Command {
     #[command(after_help = "Examples:\n  equiarm nn check-equivariance --fresh --net equi-actor --config reduced")]
     #[command(subcommand)]
     Nn(NnCommand),
+    /// The supervised rotation-estimation experiment (docs/rotest.md): datasets, training, the
+    /// invariant bound, the report.
+    #[command(subcommand)]
+    Rotest(equiarm_rotest::cli::RotestCommand),
 }
 
 #[derive(clap::Args)]
@@ -300,6 +304,7 @@ fn main() -> std::process::ExitCode {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
+        Command::Rotest(c) => equiarm_rotest::cli::run(c)?,
         Command::Msg(MsgCommand::List) => {
             for t in ALL_TYPES {
                 println!("{:<36} {}", t.type_name, t.dds_type_name);

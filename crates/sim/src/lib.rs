@@ -19,7 +19,8 @@
 //! Modules: [`assets`] (URDF files), [`world`] (rapier settings, scene), [`gripper`] (floating
 //! gripper, action semantics, holding), [`camera`] (intrinsics/extrinsics, presets), [`render`]
 //! (rasteriser + ray-cast oracle), [`tasks`] (tasks and expert planners), [`env`](mod@env) (Env / VecEnv),
-//! [`corrupt`] (symmetry corruptions), [`snapshot`] (PNG output).
+//! [`corrupt`] (symmetry corruptions), [`snapshot`] (PNG output), [`rotest`] (the rotation-estimation
+//! experiment's scene, corruptions and pairs).
 //!
 //! Limitations: the gripper floats (no arm, no IK); the bowl is built from boxes; determinism holds
 //! for one build on one machine (rapier's `enhanced-determinism` is not enabled).
@@ -32,6 +33,7 @@ pub mod error;
 pub mod gripper;
 pub mod render;
 pub mod rng;
+pub mod rotest;
 pub mod snapshot;
 pub mod tasks;
 pub mod world;

@@ -1,0 +1,369 @@
+//! The `equiarm rotest` subcommands (clap derive): `data`, `snapshots`, `bound`, `train`, `report`.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use equiarm_sim::rotest::{Corruptions, PAPER_SETTINGS, PairConfig};
+
+use crate::bound::dataset_bound;
+use crate::dataset::Dataset;
+use crate::error::Result;
+use crate::generate::{generate, setting_file_stem, write_snapshot};
+use crate::train::{ModelKind, TrainConfig};
+
+/// `equiarm rotest …`.
+#[derive(Debug, clap::Subcommand)]
+pub enum RotestCommand {
+    /// Generate a dataset: DIR/pairs.rotest.
+    #[command(
+        after_help = "Example:\n  equiarm rotest data --corrupt grid,side --pairs 2000 --seed 0 -o data/rotest/side+grid"
+    )]
+    Data {
+        /// Corruption setting: `none` or a comma-separated list of grid, occlusion,
+        /// random_light_color, light_effect, two_light_color, two_specular, squeeze, reflect,
+        /// condition_reverse (invert-label), side.
+        #[arg(long, default_value = "none")]
+        corrupt: String,
+        /// Number of pairs.
+        #[arg(long, default_value_t = 2000)]
+        pairs: usize,
+        /// Generator seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Stored image side, pixels (the paper's 152).
+        #[arg(long, default_value_t = 152)]
+        size: usize,
+        /// Rendering supersampling factor (images are area-downsampled from size · supersample).
+        #[arg(long, default_value_t = 2)]
+        supersample: usize,
+        /// Output directory.
+        #[arg(short, long)]
+        out: PathBuf,
+    },
+    /// Write snapshot PNGs of the first pairs of each of the 15 settings: `OUT/<setting>.png`.
+    Snapshots {
+        /// Pairs per setting (rows of each PNG).
+        #[arg(long, default_value_t = 2)]
+        pairs: usize,
+        /// Generator seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Image side, pixels.
+        #[arg(long, default_value_t = 152)]
+        size: usize,
+        /// Output directory.
+        #[arg(short, long)]
+        out: PathBuf,
+    },
+    /// Print the upper bound on the accuracy of a C8-invariant classifier on a dataset.
+    Bound {
+        /// Dataset directory (or its pairs.rotest file).
+        data: PathBuf,
+    },
+    /// Train and evaluate one network on one dataset: OUT/run.json and OUT/best.safetensors.
+    #[command(
+        after_help = "Examples:\n  equiarm rotest train --data data/rotest/none --model equi --train-pairs 400 --seed 0 -o runs/none/equi/400/s0\n  equiarm rotest train --data data/rotest/none --model cnn --train-pairs 400 --img-trans 400 -o runs/none/cnn+trans/400/s0\n  equiarm rotest train --paper --device cuda --data data/rotest/none --model equi --train-pairs 1600 -o runs/paper/none/equi/1600/s0"
+    )]
+    Train {
+        /// Dataset directory (or its pairs.rotest file).
+        #[arg(long)]
+        data: PathBuf,
+        /// The network.
+        #[arg(long, value_enum)]
+        model: ModelKind,
+        /// Training pairs N.
+        #[arg(long)]
+        train_pairs: usize,
+        /// "+ image transformations": add all 8 rotations of the first N training pairs (0: off).
+        #[arg(long, default_value_t = 0)]
+        img_trans: usize,
+        /// Seed of the split, the weights, the batch order and the crops.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// The schedule, the network size and the device.
+        #[command(flatten)]
+        opts: TrainOpts,
+        /// Output directory.
+        #[arg(short, long)]
+        out: PathBuf,
+    },
+    /// Run the experiment: for each setting, generate its dataset if `DATA/<setting>` has none, then
+    /// train Equi, CNN and CNN + image transformations (img-trans = N) for each N and seed whose
+    /// `RUNS/<setting>/<variant>/<N>/s<seed>/run.json` does not exist yet (so an interrupted grid
+    /// continues where it stopped), then write the report.
+    #[command(
+        after_help = "Example (a short schedule for 2 cores):\n  equiarm rotest grid --data data/rotest --runs runs/rotest --sizes 100,400 --seeds 0,1,2,3 --lr 1e-3 --min-epochs 20 --patience 20 --max-epochs 100"
+    )]
+    Grid {
+        /// Directory of the datasets (one subdirectory per setting, commas written as +).
+        #[arg(long)]
+        data: PathBuf,
+        /// Directory of the runs.
+        #[arg(long)]
+        runs: PathBuf,
+        /// Settings, separated by `;` (each a comma-separated list of flags), or `all` for the 15.
+        #[arg(long, default_value = "all")]
+        settings: String,
+        /// Training-set sizes N.
+        #[arg(long, value_delimiter = ',', default_value = "100,400,1600")]
+        sizes: Vec<usize>,
+        /// Seeds.
+        #[arg(long, value_delimiter = ',', default_value = "0,1,2,3")]
+        seeds: Vec<u64>,
+        /// Pairs per generated dataset.
+        #[arg(long, default_value_t = 2000)]
+        pairs: usize,
+        /// The schedule, the network size and the device.
+        #[command(flatten)]
+        opts: TrainOpts,
+        /// Where the report goes.
+        #[arg(long, default_value = "docs/results")]
+        report: PathBuf,
+    },
+    /// Evaluate a finished run's best weights on its test split with both images rotated by k·45°:
+    /// the fraction of predictions unchanged, and the accuracy, for each k.
+    Invariance {
+        /// The dataset the run was trained on.
+        #[arg(long)]
+        data: PathBuf,
+        /// The run directory (run.json and best.safetensors).
+        run: PathBuf,
+        /// Also evaluate with every image masked to the disc inscribed in the crop, so that 45°
+        /// rotations bring in no zero-filled corners.
+        #[arg(long)]
+        disc: bool,
+    },
+    /// Write the table (rotest.md) and one figure per setting from every run.json below RUNS.
+    Report {
+        /// Directory searched recursively for run.json files.
+        runs: PathBuf,
+        /// Directory of datasets, one subdirectory per setting (named as `data -o` was given),
+        /// to draw each setting's invariant bound; optional.
+        #[arg(long)]
+        data: Option<PathBuf>,
+        /// Output directory.
+        #[arg(short, long, default_value = "docs/results")]
+        out: PathBuf,
+    },
+}
+
+/// Training options shared by `train` and `grid`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct TrainOpts {
+    /// Use centre crops in training instead of random crops.
+    #[arg(long)]
+    pub no_crop: bool,
+    /// The paper's network size (hidden 64, 128 px input) instead of the 2-core size.
+    #[arg(long)]
+    pub paper: bool,
+    /// Hidden size (default: 16, or 64 with --paper).
+    #[arg(long)]
+    pub hidden: Option<usize>,
+    /// Network input side after cropping: 16, 32, 64 or 128 (default: 64, or 128 with --paper).
+    #[arg(long)]
+    pub input: Option<usize>,
+    /// Validation pairs.
+    #[arg(long, default_value_t = 200)]
+    pub val_pairs: usize,
+    /// Test pairs.
+    #[arg(long, default_value_t = 200)]
+    pub test_pairs: usize,
+    /// Adam learning rate.
+    #[arg(long, default_value_t = 1e-4)]
+    pub lr: f64,
+    /// Mini-batch size.
+    #[arg(long, default_value_t = 64)]
+    pub batch: usize,
+    /// Epochs always run.
+    #[arg(long, default_value_t = 100)]
+    pub min_epochs: usize,
+    /// Stop after this many epochs without a better validation accuracy.
+    #[arg(long, default_value_t = 100)]
+    pub patience: usize,
+    /// At most this many epochs.
+    #[arg(long, default_value_t = 1000)]
+    pub max_epochs: usize,
+    /// Device: `cpu`, or `cuda` / `cuda:N` in a binary built with `--features cuda`.
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
+}
+
+impl TrainOpts {
+    /// The configuration of one run with these options.
+    pub fn config(&self, model: ModelKind, train_pairs: usize, img_trans: usize, seed: u64) -> Result<TrainConfig> {
+        let mut cfg = TrainConfig::paper(model, train_pairs, seed);
+        cfg.hidden = self.hidden.unwrap_or(if self.paper { 64 } else { 16 });
+        cfg.input = self.input.unwrap_or(if self.paper { 128 } else { 64 });
+        cfg.val_pairs = self.val_pairs;
+        cfg.test_pairs = self.test_pairs;
+        cfg.img_trans = img_trans;
+        cfg.crop = !self.no_crop;
+        cfg.lr = self.lr;
+        cfg.batch = self.batch;
+        cfg.min_epochs = self.min_epochs;
+        cfg.patience = self.patience;
+        cfg.max_epochs = self.max_epochs;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+}
+
+fn print_epoch(e: &crate::train::EpochRecord) {
+    eprintln!(
+        "epoch {:4}  loss {:.4}  train {:.3}  val {:.3}  test {:.3}  {:.1} s",
+        e.epoch, e.loss, e.train_acc, e.val_acc, e.test_acc, e.seconds
+    );
+}
+
+fn summary(r: &crate::train::RunRecord) -> String {
+    let secs: f64 = r.history.iter().map(|e| e.seconds).sum();
+    format!(
+        "{} {:?} N={} img-trans {} seed {}: test accuracy {:.4} at best validation epoch {} (val {:.4}); {} epochs, {:.1} s/epoch",
+        r.corrupt,
+        r.config.model,
+        r.config.train_pairs,
+        r.config.img_trans,
+        r.config.seed,
+        r.test_acc,
+        r.best_epoch,
+        r.best_val_acc,
+        r.history.len(),
+        secs / r.history.len().max(1) as f64
+    )
+}
+
+/// The invariant bound of each setting whose dataset is in `root` (as `grid` and `data -o` name them).
+fn bounds_of(root: &std::path::Path) -> Result<BTreeMap<String, f64>> {
+    let mut bounds = BTreeMap::new();
+    for s in PAPER_SETTINGS {
+        let c = Corruptions::parse(s)?;
+        let dir = root.join(setting_file_stem(&c));
+        if dir.join(crate::dataset::FILE_NAME).is_file() {
+            let h = Dataset::read_header(&dir)?;
+            bounds.insert(c.name(), dataset_bound(&h.pairs, &c).uniform_rotation);
+        }
+    }
+    Ok(bounds)
+}
+
+/// Runs one subcommand, printing its results to stdout and progress to stderr.
+pub fn run(cmd: RotestCommand) -> Result<()> {
+    match cmd {
+        RotestCommand::Data { corrupt, pairs, seed, size, supersample, out } => {
+            let cfg = PairConfig { size, supersample, corruptions: Corruptions::parse(&corrupt)? };
+            let t0 = Instant::now();
+            let ds = generate(&cfg, pairs, seed)?;
+            let gen_s = t0.elapsed().as_secs_f64();
+            let path = ds.write(&out)?;
+            let bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+            println!(
+                "{}: {pairs} pairs of {size} px, setting {}, in {gen_s:.1} s ({:.1} pairs/s on {} threads), {:.1} MB",
+                path.display(),
+                cfg.corruptions.name(),
+                pairs as f64 / gen_s.max(1e-9),
+                rayon::current_num_threads(),
+                bytes as f64 / 1e6
+            );
+        }
+        RotestCommand::Snapshots { pairs, seed, size, out } => {
+            for s in PAPER_SETTINGS {
+                let c = Corruptions::parse(s)?;
+                let ds = generate(&PairConfig { size, supersample: 2, corruptions: c.clone() }, pairs.max(1), seed)?;
+                let p = write_snapshot(&ds, pairs, &out, &setting_file_stem(&c))?;
+                let labels: Vec<String> =
+                    ds.header.pairs.iter().map(|m| format!("idx {} label {}", m.idx, m.label)).collect();
+                println!("{}: {}", p.display(), labels.join("; "));
+            }
+        }
+        RotestCommand::Bound { data } => {
+            let h = Dataset::read_header(&data)?;
+            let b = dataset_bound(&h.pairs, &Corruptions::parse(&h.corrupt)?);
+            println!("setting {}: {} pairs", h.corrupt, b.pairs);
+            println!("bound (rotation uniform over the 8 angles, as generated): {:.4}", b.uniform_rotation);
+            println!("bound (the rotations this dataset drew):                 {:.4}", b.drawn);
+        }
+        RotestCommand::Train { data, model, train_pairs, img_trans, seed, opts, out } => {
+            let cfg = opts.config(model, train_pairs, img_trans, seed)?;
+            let device = equiarm_nn::device::open(&opts.device)?;
+            let t0 = Instant::now();
+            let ds = Dataset::read(&data, None)?;
+            eprintln!("{} pairs of {} px read in {:.2} s", ds.len(), ds.header.size, t0.elapsed().as_secs_f64());
+            let r = crate::train::run(&ds, &cfg, &device, &out, &mut print_epoch)?;
+            println!("{}", summary(&r));
+        }
+        RotestCommand::Grid { data, runs, settings, sizes, seeds, pairs, opts, report } => {
+            let list: Vec<Corruptions> = if settings.trim() == "all" {
+                PAPER_SETTINGS.iter().map(|s| Corruptions::parse(s)).collect::<Result<_, _>>()?
+            } else {
+                settings.split(';').map(Corruptions::parse).collect::<Result<_, _>>()?
+            };
+            if sizes.is_empty() || seeds.is_empty() {
+                return Err(crate::RotestError::Config {
+                    field: "--sizes/--seeds",
+                    message: "need at least one of each".into(),
+                });
+            }
+            // Check every configuration before the first run.
+            for &n in &sizes {
+                let cfg = opts.config(ModelKind::Cnn, n, n, 0)?;
+                crate::train::split(pairs, &cfg)?;
+            }
+            let device = equiarm_nn::device::open(&opts.device)?;
+            for c in &list {
+                let stem = setting_file_stem(c);
+                let dir = data.join(&stem);
+                if !dir.join(crate::dataset::FILE_NAME).is_file() {
+                    let ds = generate(&PairConfig { size: 152, supersample: 2, corruptions: c.clone() }, pairs, 0)?;
+                    println!("{}", ds.write(&dir)?.display());
+                }
+                let ds = Dataset::read(&dir, None)?;
+                for &n in &sizes {
+                    for &seed in &seeds {
+                        for (model, img_trans, name) in
+                            [(ModelKind::Equi, 0, "equi"), (ModelKind::Cnn, 0, "cnn"), (ModelKind::Cnn, n, "cnn+trans")]
+                        {
+                            let out = runs.join(&stem).join(name).join(n.to_string()).join(format!("s{seed}"));
+                            if out.join("run.json").is_file() {
+                                continue;
+                            }
+                            let cfg = opts.config(model, n, img_trans, seed)?;
+                            let r = crate::train::run(&ds, &cfg, &device, &out, &mut |_| {})?;
+                            println!("{}", summary(&r));
+                        }
+                    }
+                }
+            }
+            for f in crate::report::write(&runs, &report, &bounds_of(&data)?)? {
+                println!("{}", f.display());
+            }
+        }
+        RotestCommand::Invariance { data, run, disc } => {
+            let ds = Dataset::read(&data, None)?;
+            let cpu = equiarm_nn::device::cpu();
+            let (rec, res) = crate::train::run_agreement(&ds, &run, &cpu, false)?;
+            let masked = if disc { Some(crate::train::run_agreement(&ds, &run, &cpu, true)?.1) } else { None };
+            println!(
+                "{} {:?} N={} seed {}: {} test pairs",
+                rec.corrupt, rec.config.model, rec.config.train_pairs, rec.config.seed, rec.config.test_pairs
+            );
+            for (k, (agree, acc)) in res.iter().enumerate() {
+                let extra = masked
+                    .as_ref()
+                    .map(|m| format!("; disc-masked: unchanged {:.3}, accuracy {:.3}", m[k].0, m[k].1))
+                    .unwrap_or_default();
+                println!("rotation {:3}°: prediction unchanged {agree:.3}, accuracy {acc:.3}{extra}", 45 * k);
+            }
+        }
+        RotestCommand::Report { runs, data, out } => {
+            let bounds = match data {
+                Some(root) => bounds_of(&root)?,
+                None => BTreeMap::new(),
+            };
+            for f in crate::report::write(&runs, &out, &bounds)? {
+                println!("{}", f.display());
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,61 @@
+//! The error type of the experiment. Bad input (a flag out of its domain, a damaged or foreign
+//! dataset file, a run directory without runs) is reported naming the flag or the file.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong in `equiarm_rotest`.
+#[derive(Debug, thiserror::Error)]
+pub enum RotestError {
+    /// Reading or writing a file or directory failed.
+    #[error("{path}: {error}")]
+    Io {
+        /// The file or directory.
+        path: PathBuf,
+        /// The I/O error (in the message, not chained as a source, so it is printed once).
+        error: std::io::Error,
+    },
+    /// A file is not what it should be (not a dataset, a damaged chunk, a bad run file...).
+    #[error("{path}: {message}")]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, and where in the file.
+        message: String,
+    },
+    /// An option is out of its domain.
+    #[error("invalid value for `{field}`: {message}")]
+    Config {
+        /// The option (as on the command line, e.g. `--train-pairs`).
+        field: &'static str,
+        /// The rejected value and the domain it must lie in.
+        message: String,
+    },
+    /// The simulator failed (a camera or scene setting).
+    #[error(transparent)]
+    Sim(#[from] equiarm_sim::SimError),
+    /// A network could not be built.
+    #[error(transparent)]
+    Net(#[from] equiarm_nn::nets::NetError),
+    /// The device cannot be used.
+    #[error(transparent)]
+    Device(#[from] equiarm_nn::device::DeviceError),
+    /// Saving or loading network weights failed.
+    #[error(transparent)]
+    Checkpoint(#[from] equiarm_nn::checkpoint::CheckpointError),
+    /// Writing an image or a chart failed.
+    #[error("{path}: {message}")]
+    Image {
+        /// The output file.
+        path: PathBuf,
+        /// The encoder's or plotter's error.
+        message: String,
+    },
+}
+
+/// `Result` with [`RotestError`].
+pub type Result<T, E = RotestError> = std::result::Result<T, E>;
+
+/// Maps an I/O error on `path` to [`RotestError::Io`].
+pub(crate) fn io(path: &std::path::Path) -> impl FnOnce(std::io::Error) -> RotestError + '_ {
+    move |error| RotestError::Io { path: path.to_path_buf(), error }
+}
