@@ -171,6 +171,61 @@ eqa_recorded_run() {
   sleep 1
 }
 
+# The suite's nodes, as train.sh starts them (bench/soak.sh restarts some). They read: EQUIARM_BIN,
+# run_dir (its config.json; logs go to run_dir/logs/NAME.log), task, seed, num_envs, image (the frame
+# size), arch (the policies' architecture flags), per_env (expert episodes per env), pace (the
+# training policies' pacing flags), trainer_mode and extra (more trainer flags).
+# Start order: the recorder, the trainer, the policies, then the sims. Without multicast on the
+# loopback interface (Linux's default `lo`) RustDDS discovers same-host participants by unicast to the
+# first 12 participant ids only, so two participants started 13th and later never discover each
+# other: those must be sims, which talk only to their policy, the trainer and the recorder.
+
+# eqa_suite_trainer NAME [ARGS...]: the trainer, started as NAME with ARGS added; fails (1) when it has
+# not joined the graph within 120 s.
+eqa_suite_trainer() {
+  local name=$1
+  shift
+  eqa_start "$name" "$run_dir/logs/$name.log" "$EQUIARM_BIN" train --config "$run_dir/config.json" \
+    --run-dir "$run_dir" --eval-namespace /eval "${trainer_mode[@]}" "${extra[@]}" "$@"
+  eqa_wait_log "$name" "$run_dir/logs/$name.log" "joined ROS 2 domain" 120 || {
+    eqa_log "the trainer did not join the ROS 2 graph; see $run_dir/logs/$name.log"
+    tail -n 20 "$run_dir/logs/$name.log" >&2
+    return 1
+  }
+}
+
+# eqa_suite_policies: the training policies (/env0 … /envN-1) and the greedy eval policy (/eval).
+eqa_suite_policies() {
+  local i every episodes rate
+  for i in $(seq 0 $((num_envs - 1))); do
+    eqa_start "policy$i" "$run_dir/logs/policy$i.log" "$EQUIARM_BIN" policy --namespace "/env$i" --mode sample \
+      "${arch[@]}" --seed $((seed * 1000 + i)) --expert-episodes "$per_env" "${pace[@]}"
+  done
+  # the eval pair may run about eval_episodes × 50 steps per eval_every updates
+  every=$(eqa_config_get "$run_dir/config.json" eval_every)
+  episodes=$(eqa_config_get "$run_dir/config.json" eval_episodes)
+  rate=$(( (episodes * 50 + every - 1) / (every + 1) + 1 ))
+  eqa_start policy_eval "$run_dir/logs/policy_eval.log" "$EQUIARM_BIN" policy --namespace /eval --mode greedy \
+    "${arch[@]}" --seed $((seed * 1000 + 999)) --max-lead 50 --steps-per-update "$rate"
+}
+
+# eqa_suite_sim I [NAME]: the sim of /envI, started as NAME (default simI); /env0's also publishes its
+# simulated time on /clock (for tools with use_sim_time).
+eqa_suite_sim() {
+  local i=$1 name=${2:-sim$1} clock=()
+  [ "$i" -eq 0 ] && clock=(--clock)
+  eqa_start "$name" "$run_dir/logs/$name.log" "$EQUIARM_BIN" sim --namespace "/env$i" --task "$task" \
+    --seed $((seed * 1000 + i)) --resolution "$image" "${clock[@]}"
+}
+
+# eqa_suite_sims: the training sims and the eval sim.
+eqa_suite_sims() {
+  local i
+  for i in $(seq 0 $((num_envs - 1))); do eqa_suite_sim "$i"; done
+  eqa_start sim_eval "$run_dir/logs/sim_eval.log" "$EQUIARM_BIN" sim --namespace /eval --eval --task "$task" \
+    --seed $((seed * 1000 + 999)) --resolution "$image"
+}
+
 # eqa_config_get FILE KEY: a number or string value of KEY in a config JSON (as written by
 # `equiarm train --print-config`: one key per line; image_size, input_size, hidden and model are unique).
 eqa_config_get() {

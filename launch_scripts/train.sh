@@ -99,7 +99,6 @@ arch=(--model "$model" --hidden "$hidden" --image "$image:$input")
 pace=(--max-lead 10) trainer_mode=()
 [ $det = 1 ] && pace=(--deterministic) trainer_mode=(--deterministic)
 
-start() { eqa_start "$1" "$run_dir/logs/$1.log" "${@:2}"; }
 echo "== run directory $run_dir (ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in $run_dir/logs)"
 if [ $record = 1 ]; then
   obs_topics=(/eval/observation:equiarm_msgs/msg/Observation)
@@ -109,25 +108,10 @@ else
   mkdir -p "$run_dir/logs"
   trap eqa_on_exit EXIT; trap 'exit 130' INT; trap 'exit 143' TERM
 fi
-# Start order: the recorder, the trainer, the policies, then the sims. Without multicast on the
-# loopback interface (Linux's default `lo`) RustDDS discovers same-host participants by unicast to the
-# first 12 participant ids only, so two participants started 13th and later never discover each
-# other: those must be sims, which talk only to their policy, the trainer and the recorder.
-start trainer "$bin" train --config "$run_dir/config.json" --run-dir "$run_dir" --eval-namespace /eval "${trainer_mode[@]}" "${extra[@]}"
-eqa_wait_log trainer "$run_dir/logs/trainer.log" "joined ROS 2 domain" 120 \
-  || { eqa_log "the trainer did not join the ROS 2 graph; see $run_dir/logs/trainer.log"; tail -n 20 "$run_dir/logs/trainer.log" >&2; exit 1; }
-for i in $(seq 0 $((num_envs - 1))); do
-  start "policy$i" "$bin" policy --namespace "/env$i" --mode sample "${arch[@]}" --seed $((seed * 1000 + i)) --expert-episodes "$per_env" "${pace[@]}"
-done
-# the eval pair may run about eval_episodes × 50 steps per eval_every updates
-eval_rate=$(( ($(cfg_get eval_episodes) * 50 + $(cfg_get eval_every) - 1) / ($(cfg_get eval_every) + 1) + 1 ))
-start policy_eval "$bin" policy --namespace /eval --mode greedy "${arch[@]}" --seed $((seed * 1000 + 999)) --max-lead 50 --steps-per-update "$eval_rate"
-# /env0's sim also publishes its simulated time on /clock (for tools with use_sim_time)
-for i in $(seq 0 $((num_envs - 1))); do
-  clock=(); [ "$i" -eq 0 ] && clock=(--clock)
-  start "sim$i" "$bin" sim --namespace "/env$i" --task "$task" --seed $((seed * 1000 + i)) --resolution "$image" "${clock[@]}"
-done
-start sim_eval "$bin" sim --namespace /eval --eval --task "$task" --seed $((seed * 1000 + 999)) --resolution "$image"
+# Start order: the recorder, the trainer, the policies, then the sims (lib.sh, "The suite's nodes").
+eqa_suite_trainer trainer || exit 1
+eqa_suite_policies
+eqa_suite_sims
 
 # The trainer's output (its progress line, then its evaluation table) follows on stdout until it exits.
 tail -n +1 -f -s 0.2 --pid="$(eqa_pid trainer)" "$run_dir/logs/trainer.log" &

@@ -37,7 +37,8 @@ pub struct Standing {
 pub enum Rule {
     /// Answer every Observation at once.
     Open,
-    /// `--max-lead`: once a TrainerStatus has been seen, `policy_steps < per_update × updates + max_lead`.
+    /// `--max-lead`: once a TrainerStatus has been seen,
+    /// `policy_steps − base < per_update × updates + max_lead`.
     Lead {
         /// Policy steps allowed beyond `per_update × updates`.
         max_lead: u64,
@@ -45,6 +46,12 @@ pub enum Rule {
         per_update: u64,
         /// The trainer's update count (None until the first TrainerStatus).
         updates: Option<u64>,
+        /// Policy steps not counted: when the trainer's count goes back (a trainer resumed from a
+        /// checkpoint older than the updates it had made), the lead counts from there, so the node
+        /// and the trainer never wait for each other.
+        base: u64,
+        /// The count went back; `base` is set at the next step.
+        rebase: bool,
     },
     /// `--deterministic`: the k-th distinct Observation waits for weights version k + 1.
     Lockstep,
@@ -71,7 +78,9 @@ impl Gate {
             ),
             (true, _) => Rule::Lockstep,
             (false, 0) => Rule::Open,
-            (false, m) => Rule::Lead { max_lead: m, per_update: steps_per_update, updates: None },
+            (false, m) => {
+                Rule::Lead { max_lead: m, per_update: steps_per_update, updates: None, base: 0, rebase: false }
+            }
         };
         Ok(Gate { rule, held: None, newer_logged: false })
     }
@@ -88,7 +97,15 @@ impl Gate {
 
     /// A TrainerStatus said the trainer has made `n` updates.
     pub fn on_status(&mut self, n: u64) {
-        if let Rule::Lead { updates, .. } = &mut self.rule {
+        if let Rule::Lead { updates, rebase, .. } = &mut self.rule {
+            if let Some(u) = *updates
+                && n < u
+            {
+                log::warn!(
+                    "the trainer's update count went back from {u} to {n} (a resumed trainer): the lead counts from here"
+                );
+                *rebase = true;
+            }
             *updates = Some(n);
         }
     }
@@ -98,10 +115,15 @@ impl Gate {
         if p.repeat {
             return true;
         }
-        match self.rule {
+        match &mut self.rule {
             Rule::Open => true,
-            Rule::Lead { max_lead, per_update, updates } => {
-                !p.policy_step || updates.is_none_or(|u| p.policy_steps < per_update * u + max_lead)
+            Rule::Lead { max_lead, per_update, updates, base, rebase } => {
+                if let (true, Some(u)) = (*rebase, *updates) {
+                    *base = p.policy_steps.saturating_sub(*per_update * u);
+                    *rebase = false;
+                }
+                let steps = p.policy_steps.saturating_sub(*base);
+                !p.policy_step || updates.is_none_or(|u| steps < *per_update * u + *max_lead)
             }
             Rule::Lockstep => {
                 let want = p.answered + 1;
@@ -177,6 +199,26 @@ mod tests {
         assert!(g.allows(p(4, 0), 0) && !g.allows(p(5, 0), 0));
         assert!(g.allows(Standing { policy_step: false, ..p(9, 0) }, 0), "expert steps are not limited");
         assert_eq!(Gate::new(0, 1, false, false).unwrap().rule(), &Rule::Open);
+    }
+
+    /// Regression (found by bench/soak.sh): after a trainer was killed and resumed from a checkpoint
+    /// 10 updates older, its count (40) was below what the policies had run ahead on (50 + lead), so
+    /// they waited for updates and the trainer for their transitions until its idle timeout.
+    #[test]
+    fn a_trainer_count_that_goes_back_restarts_the_lead_instead_of_stalling() {
+        let mut g = Gate::new(10, 1, false, true).unwrap();
+        g.on_status(50);
+        assert!(!g.allows(p(60, 0), 0), "at the lead");
+        g.on_status(40);
+        assert!(g.allows(p(60, 0), 0), "the resumed trainer needs transitions to update at all");
+        assert!(g.allows(p(69, 0), 0) && !g.allows(p(70, 0), 0), "a lead of 10 from there");
+        g.on_status(41);
+        assert!(g.allows(p(70, 0), 0) && !g.allows(p(71, 0), 0));
+        // A count that only grows never moves the base.
+        let mut h = Gate::new(10, 1, false, true).unwrap();
+        h.on_status(5);
+        h.on_status(6);
+        assert!(!h.allows(p(16, 0), 0));
     }
 
     #[test]
