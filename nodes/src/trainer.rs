@@ -211,7 +211,7 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
         };
     }
     // Every way out ends with a checkpoint of the learner: wait for a running update to bring it home.
-    let learner = match (n.home.take(), n.task.take()) {
+    let mut learner = match (n.home.take(), n.task.take()) {
         (Some(l), _) => l,
         (None, Some(task)) => task.await.context("the update task failed")?.0,
         (None, None) => unreachable!("the learner is home or in its update"),
@@ -221,7 +221,7 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
         (Ok(()), Some((why, _))) => why,
         (Ok(()), None) => "end",
     };
-    let summary = n.trainer.finish(&learner, why);
+    let summary = n.trainer.finish(&mut learner, why);
     outcome?;
     Ok(summary?)
 }

@@ -482,9 +482,14 @@ impl Trainer {
     }
 
     /// The end of the run (`why` it stops): a checkpoint, the evaluations and the counts.
-    pub fn finish(mut self, learner: &Learner, why: &str) -> Result<RunSummary, TrainError> {
+    pub fn finish(mut self, learner: &mut Learner, why: &str) -> Result<RunSummary, TrainError> {
         if let Some(p) = self.progress.as_mut() {
             p.finish();
+        }
+        // Rows taken since the learner was last home (an Observation can release waiting Transitions
+        // on the last turn) are stored too: the checkpoint holds everything received.
+        for row in self.queue.drain(..) {
+            learner.push(row)?;
         }
         info!("stopping ({why}) at {} updates", learner.updates());
         let st = self.state();
