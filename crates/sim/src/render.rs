@@ -554,8 +554,14 @@ pub fn raycast(scene: &Scene, cam: &Camera) -> Frame {
 }
 
 /// Agreement between two frames: fraction of pixels with equal segmentation, and the largest depth
-/// difference over those pixels.
-pub fn agreement(a: &Frame, b: &Frame) -> (f64, f32) {
+/// difference over those pixels; `None` when the frames differ in size (nothing to compare pixel by
+/// pixel).
+pub fn agreement(a: &Frame, b: &Frame) -> Option<(f64, f32)> {
+    if (a.width, a.height, a.segmentation.len(), a.depth.len())
+        != (b.width, b.height, b.segmentation.len(), b.depth.len())
+    {
+        return None;
+    }
     let mut same = 0usize;
     let mut max_dz = 0.0f32;
     for i in 0..a.segmentation.len() {
@@ -564,7 +570,7 @@ pub fn agreement(a: &Frame, b: &Frame) -> (f64, f32) {
             max_dz = max_dz.max((a.depth[i] - b.depth[i]).abs());
         }
     }
-    (same as f64 / a.segmentation.len() as f64, max_dz)
+    Some((same as f64 / a.segmentation.len().max(1) as f64, max_dz))
 }
 
 #[cfg(test)]
@@ -611,6 +617,14 @@ mod tests {
         // row 32 crosses the box (columns ~27..37 at this field of view); column 45 is beside it on +y
         assert!(table(&b, 32, 45) < table(&a, 32, 45), "shadow right of the box");
         assert_eq!(table(&b, 32, 15), table(&a, 32, 15), "no shadow on the lit side");
+    }
+
+    /// Regression: frames of two sizes made `agreement` index out of bounds.
+    #[test]
+    fn agreement_of_frames_of_two_sizes_is_none_not_a_panic() {
+        let (a, b) = (Frame::new(4, 4, 2.0), Frame::new(4, 3, 2.0));
+        assert_eq!(agreement(&a, &b), None);
+        assert_eq!(agreement(&a, &a), Some((1.0, 0.0)));
     }
 
     #[test]

@@ -20,7 +20,7 @@ fn rasteriser_matches_raycast_oracle_for_every_task() {
             env.reset(3).unwrap();
             let raster = env.render().unwrap();
             let oracle = raycast(env.scene().unwrap(), env.camera());
-            let (same, max_dz) = agreement(&raster, &oracle);
+            let (same, max_dz) = agreement(&raster, &oracle).expect("frames of one camera have one size");
             let objects = oracle.segmentation.iter().filter(|&&s| s > 1).count();
             println!(
                 "{} {:?}: seg agreement {:.5}, max depth diff {:.2e} m, object pixels {objects}",
