@@ -77,12 +77,32 @@ async fn wait_for_answer(
     Ok(false)
 }
 
+/// The values of `key` in an `offered_qos_profiles` YAML, one per recorded publisher.
+fn offered<'a>(offered_qos: &'a str, key: &str) -> Vec<&'a str> {
+    offered_qos.lines().filter_map(|l| l.trim().strip_prefix(key)).map(str::trim).collect()
+}
+
 /// Best effort if every recorded publisher offered best effort (integer-enum YAML `reliability: 2`,
 /// or Jazzy's `best_effort`), else reliable.
 fn recorded_best_effort(offered_qos: &str) -> bool {
-    let values: Vec<&str> =
-        offered_qos.lines().filter_map(|l| l.trim().strip_prefix("reliability:")).map(str::trim).collect();
+    let values = offered(offered_qos, "reliability:");
     !values.is_empty() && values.iter().all(|v| *v == "2" || *v == "best_effort")
+}
+
+/// Transient local (latched, like `/policy/weights`) if every recorded publisher offered it
+/// (`durability: 1`, or `transient_local`): a late subscriber then gets the last sample played.
+fn recorded_latched(offered_qos: &str) -> bool {
+    let values = offered(offered_qos, "durability:");
+    !values.is_empty() && values.iter().all(|v| *v == "1" || *v == "transient_local")
+}
+
+/// The profile a topic is played with: as its publishers offered it.
+fn played_qos(offered_qos: &str) -> ros2_client::qos::QosProfile {
+    match (recorded_best_effort(offered_qos), recorded_latched(offered_qos)) {
+        (true, _) => qos::sensor_data(),
+        (false, true) => qos::latched(),
+        (false, false) => qos::stream(100),
+    }
 }
 
 /// Plays the bag once; returns (published, skipped) counts.
@@ -96,7 +116,7 @@ pub async fn run(opts: &RosOptions, cfg: PlayConfig) -> anyhow::Result<(u64, u64
     let mut publishers: HashMap<String, Box<dyn RawPublisher>> = HashMap::new();
     for (topic, t) in &info.topics {
         let to = remap(&cfg.remaps, topic);
-        let profile = if recorded_best_effort(&t.offered_qos) { qos::sensor_data() } else { qos::stream(100) };
+        let profile = played_qos(&t.offered_qos);
         let made: anyhow::Result<Box<dyn RawPublisher>> = crate::with_message_type!(&t.type_name, M => {
             Box::new(node.publisher::<M>(&to, profile)?) as Box<dyn RawPublisher>
         });
@@ -252,5 +272,16 @@ mod tests {
         assert!(!recorded_best_effort(&offered_qos_yaml(&[OfferedQos::best_effort(1), OfferedQos::reliable(1)])));
         assert!(recorded_best_effort("- history: unknown\n  reliability: best_effort\n"));
         assert!(!recorded_best_effort(""));
+    }
+
+    /// Regression: `bag play` republished the latched `/policy/weights` volatile, so a policy that
+    /// started after the sample was played never got it.
+    #[test]
+    fn recorded_transient_local_is_played_latched() {
+        assert!(recorded_latched(&offered_qos_yaml(&[OfferedQos::latched(1)])));
+        assert!(!recorded_latched(&offered_qos_yaml(&[OfferedQos::reliable(10)])));
+        assert!(!recorded_latched(&offered_qos_yaml(&[OfferedQos::latched(1), OfferedQos::reliable(1)])));
+        assert!(recorded_latched("- history: keep_last\n  durability: transient_local\n"));
+        assert!(!recorded_latched(""));
     }
 }
