@@ -291,11 +291,8 @@ fn insert_bytes(rng: &mut Rng, data: &mut Vec<u8>) {
     let most = if rng.one_in(8) { 256 } else { 16 };
     let n = 1 + rng.below(most);
     let at = rng.below(data.len() + 1);
-    let bytes: Vec<u8> = if rng.one_in(2) {
-        vec![rng.next() as u8; n]
-    } else {
-        (0..n).map(|_| rng.next() as u8).collect()
-    };
+    let bytes: Vec<u8> =
+        if rng.one_in(2) { vec![rng.next() as u8; n] } else { (0..n).map(|_| rng.next() as u8).collect() };
     data.splice(at..at, bytes);
 }
 
@@ -335,7 +332,10 @@ fn number_text(rng: &mut Rng, data: &mut Vec<u8>) {
 fn replace_number(rng: &mut Rng, data: &mut Vec<u8>) {
     let is_num = |b: u8| b.is_ascii_digit() || matches!(b, b'-' | b'+' | b'.' | b'e' | b'E');
     let starts: Vec<usize> = (0..data.len())
-        .filter(|&i| data[i].is_ascii_digit() && (i == 0 || !is_num(data[i - 1])) || (data[i] == b'-' && i + 1 < data.len() && data[i + 1].is_ascii_digit()))
+        .filter(|&i| {
+            data[i].is_ascii_digit() && (i == 0 || !is_num(data[i - 1]))
+                || (data[i] == b'-' && i + 1 < data.len() && data[i + 1].is_ascii_digit())
+        })
         .collect();
     if starts.is_empty() {
         number_text(rng, data);
@@ -375,8 +375,14 @@ mod tests {
         let changed = (2..1002).filter(|&i| !m.seeds().contains(&m.input(1, "t", i))).count();
         assert!(changed > 900, "only {changed} of 1000 inputs differ from every seed");
         // other seeds and other targets give other inputs
-        assert_ne!((2..50).map(|i| m.input(1, "t", i)).collect::<Vec<_>>(), (2..50).map(|i| m.input(2, "t", i)).collect::<Vec<_>>());
-        assert_ne!((2..50).map(|i| m.input(1, "t", i)).collect::<Vec<_>>(), (2..50).map(|i| m.input(1, "u", i)).collect::<Vec<_>>());
+        assert_ne!(
+            (2..50).map(|i| m.input(1, "t", i)).collect::<Vec<_>>(),
+            (2..50).map(|i| m.input(2, "t", i)).collect::<Vec<_>>()
+        );
+        assert_ne!(
+            (2..50).map(|i| m.input(1, "t", i)).collect::<Vec<_>>(),
+            (2..50).map(|i| m.input(1, "u", i)).collect::<Vec<_>>()
+        );
     }
 
     #[test]

@@ -265,7 +265,10 @@ pub fn run_target(target: &Target, opts: &Options, exe: &Path) -> Result<Outcome
             } else if running == 0 && spawned.elapsed() > SETUP_LIMIT {
                 let _ = child.kill();
                 let _ = child.wait();
-                return Err(RunError::Worker { target: target.name, what: format!("did not set up within {SETUP_LIMIT:?}") });
+                return Err(RunError::Worker {
+                    target: target.name,
+                    what: format!("did not set up within {SETUP_LIMIT:?}"),
+                });
             }
             std::thread::sleep(Duration::from_millis(5));
         };
@@ -281,15 +284,21 @@ pub fn run_target(target: &Target, opts: &Options, exe: &Path) -> Result<Outcome
         } else if done && status.success() {
             next = opts.execs;
         } else if running == 0 {
-            let tail = stderr_tail.lock().map(|t| t.iter().cloned().collect::<Vec<_>>().join(" | ")).unwrap_or_default();
-            return Err(RunError::Worker { target: target.name, what: format!("died while setting up ({status}): {tail}") });
+            let tail =
+                stderr_tail.lock().map(|t| t.iter().cloned().collect::<Vec<_>>().join(" | ")).unwrap_or_default();
+            return Err(RunError::Worker {
+                target: target.name,
+                what: format!("died while setting up ({status}): {tail}"),
+            });
         } else {
             // give the stderr reader a moment to take the last lines
             std::thread::sleep(Duration::from_millis(20));
             let last = stderr_tail
                 .lock()
                 .ok()
-                .and_then(|t| t.iter().rev().find(|l| !l.starts_with(char::is_whitespace) && !l.starts_with("note:")).cloned())
+                .and_then(|t| {
+                    t.iter().rev().find(|l| !l.starts_with(char::is_whitespace) && !l.starts_with("note:")).cloned()
+                })
                 .unwrap_or_default();
             fail(running - 1, FailureKind::Abort(format!("{status}; stderr: {last}")))?;
             next = running;
@@ -360,12 +369,20 @@ fn limit_memory(mb: u64) -> std::io::Result<()> {
 
 /// The worker: runs inputs `from..execs` of `target`, storing each index in the progress file
 /// before it runs, reporting panics on standard output.
-pub fn worker(target: &Target, seed: u64, from: u64, execs: u64, memory_mb: u64, progress: &Path) -> Result<(), RunError> {
+pub fn worker(
+    target: &Target,
+    seed: u64,
+    from: u64,
+    execs: u64,
+    memory_mb: u64,
+    progress: &Path,
+) -> Result<(), RunError> {
     let progress = Progress::open(progress, false)?;
     limit_memory(memory_mb).map_err(io_err(Path::new("setrlimit")))?;
     let scratch = tempfile::tempdir().map_err(io_err(Path::new("a temporary directory")))?;
     let mutator = mutator(target, scratch.path())?;
-    let mut harness = target.harness(scratch.path()).map_err(|source| RunError::Setup { target: target.name, source })?;
+    let mut harness =
+        target.harness(scratch.path()).map_err(|source| RunError::Setup { target: target.name, source })?;
     let stdout = std::io::stdout();
     let say = |line: String| {
         let mut out = stdout.lock();
@@ -399,7 +416,8 @@ pub fn worker(target: &Target, seed: u64, from: u64, execs: u64, memory_mb: u64,
 pub fn run_file(target: &Target, input: &Path) -> Result<bool, RunError> {
     let bytes = std::fs::read(input).map_err(io_err(input))?;
     let scratch = tempfile::tempdir().map_err(io_err(Path::new("a temporary directory")))?;
-    let mut harness = target.harness(scratch.path()).map_err(|source| RunError::Setup { target: target.name, source })?;
+    let mut harness =
+        target.harness(scratch.path()).map_err(|source| RunError::Setup { target: target.name, source })?;
     Ok(harness.run(&bytes))
 }
 
@@ -410,7 +428,9 @@ mod tests {
     #[test]
     fn reports_parse_and_keep_spaces_in_messages() {
         assert!(matches!(parse_report("READY 42"), Some(Report::Ready(42))));
-        assert!(matches!(parse_report("PANIC 7 panicked at a.rs:1:2: x y"), Some(Report::Panic(7, m)) if m == "panicked at a.rs:1:2: x y"));
+        assert!(
+            matches!(parse_report("PANIC 7 panicked at a.rs:1:2: x y"), Some(Report::Panic(7, m)) if m == "panicked at a.rs:1:2: x y")
+        );
         assert!(matches!(parse_report("DONE"), Some(Report::Done)));
         assert!(parse_report("noise from a library").is_none());
     }

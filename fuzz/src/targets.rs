@@ -456,7 +456,8 @@ fn bag_seeds(scratch: &Path) -> Result<Vec<Vec<u8>>, SetupError> {
     use equiarm_msgs::msg::{GripperCommand, Observation, Transition};
     let bag = |e: &dyn std::fmt::Display| SetupError::Project { what: "writing a seed bag", message: e.to_string() };
     let mut out = Vec::new();
-    let cases = [(Compression::None, true), (Compression::Zstd, true), (Compression::Lz4, true), (Compression::None, false)];
+    let cases =
+        [(Compression::None, true), (Compression::Zstd, true), (Compression::Lz4, true), (Compression::None, false)];
     for (i, (compression, finish)) in cases.into_iter().enumerate() {
         let dir = scratch.join(format!("seed_bag{i}"));
         if dir.exists() {
@@ -476,11 +477,7 @@ fn bag_seeds(scratch: &Path) -> Result<Vec<Vec<u8>>, SetupError> {
             c.obs_seq = k;
             let mut x = <Transition as Samples>::samples().remove(0);
             x.obs_seq = k;
-            for (topic, data) in [
-                (obs, cdr::encode(&o)),
-                (cmd, cdr::encode(&c)),
-                (tr, cdr::encode(&x)),
-            ] {
+            for (topic, data) in [(obs, cdr::encode(&o)), (cmd, cdr::encode(&c)), (tr, cdr::encode(&x))] {
                 let data = data.map_err(|e| bag(&e))?;
                 w.write(topic, t, t, &data).map_err(|e| bag(&e))?;
             }
@@ -645,7 +642,8 @@ impl Harness for TrainConfigHarness {
         {
             // an accepted config is what a checkpoint's manifest stores and a resume compares
             let again = serde_json::to_string(&cfg).expect("an accepted TrainConfig serialises");
-            let back = TrainConfig::from_json(&again).unwrap_or_else(|e| panic!("an accepted TrainConfig does not read back: {e}"));
+            let back = TrainConfig::from_json(&again)
+                .unwrap_or_else(|e| panic!("an accepted TrainConfig does not read back: {e}"));
             assert!(back == cfg, "an accepted TrainConfig reads back different: {again}");
         }
         true
@@ -656,9 +654,13 @@ impl Harness for TrainConfigHarness {
 // Weights, optimiser state, checkpoints
 
 fn small_actor() -> Result<equiarm_nn::nets::EquiActor, SetupError> {
-    use equiarm_nn::{init::Init, nets::{EquiActor, NetConfig}};
+    use equiarm_nn::{
+        init::Init,
+        nets::{EquiActor, NetConfig},
+    };
     let cfg = NetConfig { hidden: 8, input_size: 8, in_channels: 5 };
-    EquiActor::new(&cfg, &Init::new(1), &equiarm_nn::device::cpu()).map_err(|e| SetupError::project("building the actor")(&e))
+    EquiActor::new(&cfg, &Init::new(1), &equiarm_nn::device::cpu())
+        .map_err(|e| SetupError::project("building the actor")(&e))
 }
 
 fn weights_seeds(_: &Path) -> Result<Vec<Vec<u8>>, SetupError> {
@@ -737,7 +739,8 @@ fn tiny_learner() -> Result<equiarm_sac::learner::Learner, SetupError> {
     use equiarm_sac::{frame::StoredFrame, replay::Stored};
     let cfg = tiny_config();
     let s = cfg.image_size;
-    let mut learner = equiarm_sac::learner::Learner::new(cfg).map_err(|e| SetupError::project("building the learner")(&e))?;
+    let mut learner =
+        equiarm_sac::learner::Learner::new(cfg).map_err(|e| SetupError::project("building the learner")(&e))?;
     let frame = |k: usize| {
         let color: Vec<u8> = (0..s * s * 3).map(|i| ((i + k) * 7 % 256) as u8).collect();
         let depth: Vec<f32> = (0..s * s).map(|i| 0.5 + (i % 5) as f32 * 0.01).collect();
@@ -768,7 +771,8 @@ fn resume_seeds(scratch: &Path) -> Result<Vec<Vec<u8>>, SetupError> {
         out.push(seed);
     }
     let replay = &out[REPLAY_BODY - 1][1..];
-    let body = zstd::decode_all(&replay[REPLAY_HEAD.min(replay.len())..]).map_err(SetupError::io(&dir.join("replay.bin.zst")))?;
+    let body = zstd::decode_all(&replay[REPLAY_HEAD.min(replay.len())..])
+        .map_err(SetupError::io(&dir.join("replay.bin.zst")))?;
     let mut seed = vec![REPLAY_BODY as u8];
     seed.extend_from_slice(&replay[..REPLAY_HEAD]);
     seed.extend(body);
@@ -799,7 +803,8 @@ impl Harness for Resume {
     fn run(&mut self, input: &[u8]) -> bool {
         let Some((&which, content)) = input.split_first() else { return false };
         if let Some(i) = self.changed.take() {
-            std::fs::write(self.dir.join(CHECKPOINT_FILES[i]), &self.originals[i]).expect("restoring a checkpoint file");
+            std::fs::write(self.dir.join(CHECKPOINT_FILES[i]), &self.originals[i])
+                .expect("restoring a checkpoint file");
         }
         let which = which as usize % (CHECKPOINT_FILES.len() + 1);
         let (file, bytes) = if which == REPLAY_BODY {
@@ -916,7 +921,11 @@ impl Harness for CliHarness {
             Err(e) => {
                 // the message says why: out of which range, or not a number of which kind
                 let m = e.to_string();
-                assert!(m.contains(" is outside ") || m.contains(" is not a "), "{} refused {s:?} saying {m:?}", CLI_PARSERS[which]);
+                assert!(
+                    m.contains(" is outside ") || m.contains(" is not a "),
+                    "{} refused {s:?} saying {m:?}",
+                    CLI_PARSERS[which]
+                );
                 false
             }
         }
