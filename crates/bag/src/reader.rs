@@ -278,10 +278,54 @@ fn chunk_at(map: &[u8], offset: u64, len: u64) -> Result<Vec<Record<'static>>, S
     }
 }
 
+/// Longest record read inside a chunk: 1 GiB, far above any message equiarm records (a paper-size
+/// `PolicyWeights` is tens of MB), so a damaged length is refused instead of reserved.
+pub const MAX_RECORD_LEN: u64 = 1 << 30;
+
 /// Every record of a chunk (decompressed, its CRC checked at the end), owned.
+///
+/// Read through mcap's sans-io reader with a record length limit (the chunk's uncompressed size,
+/// at most [`MAX_RECORD_LEN`]): mcap's `ChunkReader` has none and reserved whatever length a record
+/// inside the chunk gave, up to 2^64 bytes, before finding the data short, which aborted the process.
 fn chunk_records(header: records::ChunkHeader, data: &[u8]) -> Result<Vec<Record<'static>>, String> {
-    let reader = mcap::read::ChunkReader::new(header, data).map_err(|e| e.to_string())?;
-    reader.map(|r| r.map(Record::into_owned).map_err(|e| e.to_string())).collect()
+    // the chunk record as a file holds it: opcode, length, then the header fields and the records
+    let mut body = Vec::with_capacity(36 + header.compression.len() + data.len());
+    body.extend(header.message_start_time.to_le_bytes());
+    body.extend(header.message_end_time.to_le_bytes());
+    body.extend(header.uncompressed_size.to_le_bytes());
+    body.extend(header.uncompressed_crc.to_le_bytes());
+    body.extend((header.compression.len() as u32).to_le_bytes());
+    body.extend(header.compression.as_bytes());
+    body.extend((data.len() as u64).to_le_bytes());
+    body.extend(data);
+    let mut record = vec![records::op::CHUNK];
+    record.extend((body.len() as u64).to_le_bytes());
+    record.extend(body);
+    // (never below the chunk header's own length, which the reader checks against the same limit)
+    let header_len = 40 + header.compression.len() as u64;
+    let limit = usize::try_from(header.uncompressed_size.min(MAX_RECORD_LEN).max(header_len)).unwrap_or(usize::MAX);
+    let options = mcap::sans_io::LinearReaderOptions::default()
+        .with_skip_start_magic(true)
+        .with_skip_end_magic(true)
+        .with_validate_chunk_crcs(true)
+        .with_record_length_limit(limit);
+    let mut reader = mcap::sans_io::LinearReader::new_with_options(options);
+    let mut rest = record.as_slice();
+    let mut out = Vec::new();
+    while let Some(event) = reader.next_event() {
+        match event.map_err(|e| e.to_string())? {
+            mcap::sans_io::LinearReadEvent::ReadRequest(need) => {
+                let n = need.min(rest.len());
+                reader.insert(n).copy_from_slice(&rest[..n]);
+                reader.notify_read(n);
+                rest = &rest[n..];
+            }
+            mcap::sans_io::LinearReadEvent::Record { data, opcode } => {
+                out.push(mcap::read::parse_record(opcode, data).map_err(|e| e.to_string())?.into_owned());
+            }
+        }
+    }
+    Ok(out)
 }
 
 /// Hands one decoded message record to `f`; `channel` is its channel.

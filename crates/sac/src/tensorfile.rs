@@ -48,8 +48,7 @@ pub fn write(
         .map(|((name, shape, _), b)| Ok((name.as_str(), TensorView::new(Dtype::F32, shape.clone(), b)?)))
         .collect::<Result<Vec<_>, safetensors::SafeTensorError>>()
         .map_err(invalid)?;
-    let info: HashMap<String, String> = meta.iter().cloned().collect();
-    let file = safetensors::serialize(views, Some(info)).map_err(invalid)?;
+    let file = with_metadata(safetensors::serialize(views, None::<HashMap<String, String>>).map_err(invalid)?, meta)?;
     let tmp = path.with_extension("tmp");
     {
         let mut f = std::fs::File::create(&tmp)?;
@@ -57,6 +56,32 @@ pub fn write(
         f.sync_all()?;
     }
     std::fs::rename(&tmp, path)
+}
+
+/// `file` (a safetensors file without metadata) with `meta` as its `__metadata__`, keys sorted.
+// NOTE: the safetensors crate takes metadata as a HashMap and writes it in the map's random
+// iteration order, so the same state saved twice gave different bytes (found by equiarm_fuzz,
+// whose seeds must be the same every time); here the header is rebuilt with the keys in order.
+fn with_metadata(file: Vec<u8>, meta: &[(String, String)]) -> std::io::Result<Vec<u8>> {
+    let bad = || std::io::Error::new(std::io::ErrorKind::InvalidData, "safetensors wrote an unexpected header");
+    let n = usize::try_from(u64::from_le_bytes(file.get(..8).ok_or_else(bad)?.try_into().map_err(|_| bad())?))
+        .map_err(|_| bad())?;
+    let header = std::str::from_utf8(file.get(8..8 + n).ok_or_else(bad)?).map_err(|_| bad())?.trim_end();
+    let tensors = header.strip_prefix('{').ok_or_else(bad)?;
+    if meta.is_empty() {
+        return Ok(file);
+    }
+    let sorted: BTreeMap<&str, &str> = meta.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+    let meta_json = serde_json::to_string(&sorted).map_err(|_| bad())?;
+    let sep = if tensors.trim_start().starts_with('}') { "" } else { "," };
+    let mut text = format!("{{\"__metadata__\":{meta_json}{sep}{tensors}").into_bytes();
+    while !text.len().is_multiple_of(8) {
+        text.push(b' ');
+    }
+    let mut out = (text.len() as u64).to_le_bytes().to_vec();
+    out.extend(text);
+    out.extend(&file[8 + n..]);
+    Ok(out)
 }
 
 /// Read a file written by [`write()`] (or any safetensors file of F32 tensors).
@@ -132,6 +157,30 @@ mod tests {
             vec![("w.m".to_string(), vec![2], vec![0.5, -1.0]), ("w.v".to_string(), vec![2], vec![2.0, 4.0])]
         );
         assert_eq!(f.meta.get("step").map(String::as_str), Some("3"));
+    }
+
+    /// Regression (issue 28, found by equiarm_fuzz): the metadata came out in a HashMap's random
+    /// order, so the same optimiser state saved twice gave different files.
+    #[test]
+    fn the_same_state_always_gives_the_same_bytes() {
+        let dir_tmp = tempfile::tempdir().unwrap();
+        let path = dir_tmp.path().join("state.safetensors");
+        let tensors = vec![("w.m".to_string(), vec![2], vec![0.5, -1.0]), ("w.v".to_string(), vec![2], vec![2.0, 4.0])];
+        let meta: Vec<(String, String)> =
+            ["step", "lr", "beta1", "beta2"].iter().map(|k| (k.to_string(), format!("{k}-value"))).collect();
+        write(&path, &tensors, &meta).unwrap();
+        let first = std::fs::read(&path).unwrap();
+        for i in 0..16 {
+            write(&path, &tensors, &meta).unwrap();
+            assert_eq!(std::fs::read(&path).unwrap(), first, "write {i}");
+        }
+        let f = read(&path).unwrap();
+        assert_eq!(f.meta.len(), 4);
+        assert_eq!(f.meta.get("beta2").map(String::as_str), Some("beta2-value"));
+        assert_eq!(f.tensors.len(), 2);
+        // without metadata the file is what the safetensors crate writes
+        write(&path, &tensors, &[]).unwrap();
+        assert!(read(&path).unwrap().meta.is_empty());
     }
 
     #[test]
