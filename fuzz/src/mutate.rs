@@ -7,9 +7,9 @@
 //! ranges deleted or duplicated, splices of another seed, truncation, and for text inputs tokens of
 //! the target's dictionary and numbers written out as text (`1e308`, `-1`, `NaN`, `18446744073709551616`).
 
-/// A small, fast, deterministic random number generator (SplitMix64).
+/// The simulator's seeded generator (splitmix64, `equiarm_sim::rng::Rng`), one stream per input.
 #[derive(Clone, Debug)]
-pub struct Rng(u64);
+pub struct Rng(equiarm_sim::rng::Rng);
 
 impl Rng {
     /// A generator for input `index` of a run with `seed` on the target named `target`.
@@ -18,23 +18,17 @@ impl Rng {
         for b in target.bytes() {
             h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
         }
-        let mut r = Rng(seed ^ h.rotate_left(17) ^ index.wrapping_mul(0x9e37_79b9_7f4a_7c15));
-        r.next();
-        r
+        Rng(equiarm_sim::rng::Rng::new(seed ^ h.rotate_left(17) ^ index.wrapping_mul(0x9e37_79b9_7f4a_7c15)))
     }
 
     /// The next 64 random bits.
-    pub fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
+    pub fn next_u64(&mut self) -> u64 {
+        self.0.next_u64()
     }
 
     /// A number in `0..n` (0 when `n` is 0).
     pub fn below(&mut self, n: usize) -> usize {
-        if n == 0 { 0 } else { (self.next() % n as u64) as usize }
+        if n == 0 { 0 } else { (self.next_u64() % n as u64) as usize }
     }
 
     /// True with probability `1/n`.
@@ -244,7 +238,7 @@ fn flip_bit(rng: &mut Rng, data: &mut [u8]) {
 fn random_byte(rng: &mut Rng, data: &mut [u8]) {
     if !data.is_empty() {
         let at = rng.below(data.len());
-        data[at] = rng.next() as u8;
+        data[at] = rng.next_u64() as u8;
     }
 }
 
@@ -292,7 +286,7 @@ fn insert_bytes(rng: &mut Rng, data: &mut Vec<u8>) {
     let n = 1 + rng.below(most);
     let at = rng.below(data.len() + 1);
     let bytes: Vec<u8> =
-        if rng.one_in(2) { vec![rng.next() as u8; n] } else { (0..n).map(|_| rng.next() as u8).collect() };
+        if rng.one_in(2) { vec![rng.next_u64() as u8; n] } else { (0..n).map(|_| rng.next_u64() as u8).collect() };
     data.splice(at..at, bytes);
 }
 

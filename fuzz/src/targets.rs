@@ -744,7 +744,7 @@ fn tiny_learner() -> Result<equiarm_sac::learner::Learner, SetupError> {
     let frame = |k: usize| {
         let color: Vec<u8> = (0..s * s * 3).map(|i| ((i + k) * 7 % 256) as u8).collect();
         let depth: Vec<f32> = (0..s * s).map(|i| 0.5 + (i % 5) as f32 * 0.01).collect();
-        StoredFrame::new(s, color, &depth, k % 2 == 0).map(Arc::new)
+        StoredFrame::new(s, color, &depth, k.is_multiple_of(2)).map(Arc::new)
     };
     for k in 0..3 {
         let t = Stored {

@@ -52,7 +52,13 @@ fn a_huge_record_length_inside_a_chunk_loses_the_chunk_instead_of_aborting() {
         let r = Reader::open(&bad).unwrap();
         assert!(r.for_each(ReadMode::Strict, |_| Ok::<(), ()>(())).is_err(), "{name}: strict mode fails");
         let mut got = 0u64;
-        let report = r.for_each(ReadMode::Salvage, |_| Ok::<(), ()>(got += 1)).unwrap().unwrap();
+        let report = r
+            .for_each(ReadMode::Salvage, |_| {
+                got += 1;
+                Ok::<(), ()>(())
+            })
+            .unwrap()
+            .unwrap();
         assert_eq!(report.lost.len(), 1, "{name}: one chunk lost: {:?}", report.lost);
         assert!(got > N / 2 && got < N, "{name}: the other chunks are read ({got} of {N})");
         let info = r.info().unwrap();
