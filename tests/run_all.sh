@@ -36,6 +36,7 @@ netup='if command -v ip >/dev/null; then ip link set lo up; ip link set lo multi
 
 echo "== Rust tests"
 "${ns[@]}" bash -c "$netup; exec cargo test --locked --offline --workspace"
+echo "== fuzz: 10^4 inputs per target (docs/fuzzing.md)" && "$CARGO_TARGET_DIR/debug/equiarm_fuzz" all --execs 10000
 echo "== Python tests"
 # The launch-script examples drive real nodes over DDS: same private namespace, our binary.
 export EQUIARM_BIN="$CARGO_TARGET_DIR/debug/equiarm"

@@ -25,8 +25,10 @@ struct Args {
     /// Seconds one input may run before it counts as a hang.
     #[arg(long, default_value_t = 5.0)]
     time_limit_s: f64,
-    /// Address-space limit of a worker process, MiB (an allocation beyond it is reported as an abort).
-    #[arg(long, default_value_t = 4096)]
+    /// Address-space limit of a worker process, MiB (an allocation beyond it is reported as an
+    /// abort). Above 4 GiB: the mcap crate reserves a string's u32 length before checking the
+    /// record holds it (docs/fuzzing.md, "Limitations").
+    #[arg(long, default_value_t = 8192)]
     memory_mb: u64,
     /// Where failing inputs are written (default: the `crashes` folder of this crate).
     #[arg(long)]

@@ -319,6 +319,21 @@ impl TrainConfig {
 mod tests {
     use super::*;
 
+    /// Regression (issue 28, found by equiarm_fuzz train_config): serde_json read some floats it
+    /// had written (17 significant digits) one bit off, so a config did not read back equal from
+    /// its own JSON and a checkpoint's manifest could refuse to resume the run that wrote it.
+    #[test]
+    fn configs_read_back_bit_for_bit_from_their_own_json() {
+        let mut c = TrainConfig::reduced("block_pulling");
+        c.agent.gamma = "0.9184467440737095".parse().unwrap();
+        c.agent.expert_weight = "1.1844674407370955e20".parse().unwrap();
+        c.replay.priority_eps = "118446744073709.55".parse().unwrap();
+        let text = serde_json::to_string(&c).unwrap();
+        let back = TrainConfig::from_json(&text).unwrap();
+        assert_eq!(back.agent.gamma.to_bits(), c.agent.gamma.to_bits(), "{text}");
+        assert_eq!(back, c, "{text}");
+    }
+
     #[test]
     fn presets_validate_and_round_trip() {
         for task in ["block_pulling", "block_pushing", "block_picking", "drawer_opening", "block_in_bowl"] {
