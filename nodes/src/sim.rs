@@ -156,7 +156,7 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
     let signal = shutdown_signal();
     tokio::pin!(signal);
     'episodes: while sim.episodes_started() < args.episodes.unwrap_or(u32::MAX) {
-        let mut obs = sim.reset()?;
+        let mut obs = sim.reset()?.clone();
         publish_clock(&obs.header.stamp).await?;
         camera.publish(&node, &obs).await?;
         obs_pub.publish(obs.clone()).await?;

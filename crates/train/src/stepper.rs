@@ -114,9 +114,8 @@ pub struct Stepper {
     episode: u32,
     next_episode: u32,
     seed: u64,
-    /// The seq and step of the observation waiting for its command (its frames are the caller's:
-    /// kept once, not copied here).
-    waiting: Option<(u64, u32)>,
+    /// The observation waiting for its command.
+    obs: Option<Observation>,
     ret: f32,
     disc: f32,
     discount: f32,
@@ -139,7 +138,7 @@ impl Stepper {
             episode: 0,
             next_episode: 0,
             seed: 0,
-            waiting: None,
+            obs: None,
             ret: 0.0,
             disc: 0.0,
             discount: 1.0,
@@ -159,7 +158,7 @@ impl Stepper {
     }
 
     /// Start the next episode; its first observation.
-    pub fn reset(&mut self) -> Result<Observation, StepError> {
+    pub fn reset(&mut self) -> Result<&Observation, StepError> {
         self.episode = self.next_episode;
         self.next_episode += 1;
         self.seed = self.seeds.next_u64();
@@ -170,18 +169,22 @@ impl Stepper {
             .map_err(|source| StepError::Sim { what: format!("resetting {task} with seed {}", self.seed), source })?;
         let obs = observation(first, self.seq, &self.name, self.episode, self.clock.tick())?;
         (self.ret, self.disc, self.discount, self.all_expert) = (0.0, 0.0, 1.0, true);
-        self.waiting = Some((obs.seq, obs.step));
-        Ok(obs)
+        Ok(self.obs.insert(obs))
+    }
+
+    /// The observation waiting for its command.
+    pub fn observation(&self) -> Option<&Observation> {
+        self.obs.as_ref()
     }
 
     /// Apply `cmd` if it answers the waiting observation and is finite (out-of-range values are
     /// clipped by the simulator). `None`: not for the observation waited on, or with a non-finite
     /// field: counted, the wait goes on.
     pub fn command(&mut self, cmd: GripperCommand) -> Result<Option<Step>, StepError> {
-        let Some((obs_seq, obs_step)) = self.waiting else { return Ok(None) };
-        if cmd.obs_seq != obs_seq {
+        let Some(obs) = self.obs.as_ref() else { return Ok(None) };
+        if cmd.obs_seq != obs.seq {
             self.stats.wrong_seq += 1;
-            log::debug!("ignoring a command for obs_seq {} (waiting for {obs_seq})", cmd.obs_seq);
+            log::debug!("ignoring a command for obs_seq {} (waiting for {})", cmd.obs_seq, obs.seq);
             return Ok(None);
         }
         if let Some(bad) = non_finite_fields(&cmd) {
@@ -197,7 +200,7 @@ impl Stepper {
             }
             Err(source) => return Err(StepError::Sim { what: "stepping the env".into(), source }),
         };
-        self.waiting = None;
+        let obs = self.obs.take().expect("checked");
         self.stats.steps += 1;
         let expert = cmd.source == GripperCommand::SOURCE_EXPERT;
         self.all_expert &= expert;
@@ -213,8 +216,8 @@ impl Stepper {
             header: next.header.clone(),
             env: self.name.clone(),
             episode: self.episode,
-            step: obs_step,
-            obs_seq,
+            step: obs.step,
+            obs_seq: obs.seq,
             next_obs_seq: next.seq,
             action: cmd,
             reward: r.reward,
@@ -223,7 +226,7 @@ impl Stepper {
             expert,
         };
         if !r.done {
-            self.waiting = Some((next.seq, next.step));
+            self.obs = Some(next.clone());
             return Ok(Some(Step { next, transition, result: None }));
         }
         let result = EpisodeResult {
