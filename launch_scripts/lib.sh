@@ -52,7 +52,9 @@ eqa_start() {
   # A script's background commands start with SIGINT ignored (and a script started in the background
   # cannot un-ignore it): reset it in the child with `env --default-signal` (coreutils >= 8.31) when
   # available, so that SIGINT stops the process.
-  ( trap - INT QUIT; exec setsid "${EQA_DEFAULT_SIGNAL[@]}" "$@" >"$log" 2>&1 </dev/null ) &
+  # The log is appended to: a resumed run keeps the logs of the part before.
+  [ -s "$log" ] && echo "==== $(date '+%F %T') started again: $*" >> "$log"
+  ( trap - INT QUIT; exec setsid "${EQA_DEFAULT_SIGNAL[@]}" "$@" >>"$log" 2>&1 </dev/null ) &
   EQA_PIDS+=("$!")
   EQA_NAMES+=("$name")
   eqa_log "started $name (pid $!): $*"
@@ -151,13 +153,16 @@ eqa_on_exit() {
   return $rc
 }
 
-# eqa_recorded_run OUT [TOPIC:TYPE...]: creates OUT/logs, sets EQA_BAG=OUT/bag (printed at exit),
+# eqa_recorded_run OUT [TOPIC:TYPE...]: creates OUT/logs, sets EQA_BAG=OUT/bag (printed at exit; a run
+# resumed in OUT records into the first free OUT/bag-2, OUT/bag-3, ..., the earlier bags kept whole),
 # installs the exit and signal traps, starts the recorder of every topic and gives it a second to join
 # the graph. The TOPIC:TYPE arguments (the callers pass each env's `observation` topic) are subscribed
 # from the start too.
 eqa_recorded_run() {
   mkdir -p "$1/logs"
   EQA_BAG="$1/bag"
+  local n=2
+  while [ -e "$EQA_BAG" ]; do EQA_BAG="$1/bag-$n"; n=$((n + 1)); done
   EQA_EXIT_MESSAGE="bag: $EQA_BAG"
   trap eqa_on_exit EXIT
   trap 'exit 130' INT

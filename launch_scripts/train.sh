@@ -109,12 +109,14 @@ else
   trap eqa_on_exit EXIT; trap 'exit 130' INT; trap 'exit 143' TERM
 fi
 # Start order: the recorder, the trainer, the policies, then the sims (lib.sh, "The suite's nodes").
+# (the trainer's log is appended to: a resumed run's output is followed from where it starts)
+log_from=$(( $(stat -c %s "$run_dir/logs/trainer.log" 2>/dev/null || echo 0) + 1 ))
 eqa_suite_trainer trainer || exit 1
 eqa_suite_policies
 eqa_suite_sims
 
 # The trainer's output (its progress line, then its evaluation table) follows on stdout until it exits.
-tail -n +1 -f -s 0.2 --pid="$(eqa_pid trainer)" "$run_dir/logs/trainer.log" &
+tail -c +"$log_from" -f -s 0.2 --pid="$(eqa_pid trainer)" "$run_dir/logs/trainer.log" &
 EQA_FOLLOW_PID=$!
 set +e
 eqa_exit_status trainer
@@ -123,8 +125,8 @@ wait "$EQA_FOLLOW_PID" 2>/dev/null
 set -e
 echo "== training finished (exit $status); stopping the suite"
 eqa_stop_all
-if [ $record = 1 ] && [ -d "$run_dir/bag" ]; then
+if [ $record = 1 ] && [ -d "$EQA_BAG" ]; then
   echo "== bag"
-  "$bin" bag info "$run_dir/bag" | head -20 || true
+  "$bin" bag info "$EQA_BAG" | head -20 || true
 fi
 exit $status

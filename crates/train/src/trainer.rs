@@ -59,7 +59,9 @@ struct NodeState {
     /// The message schema the run's transport used ([`equiarm_msgs::SCHEMA_VERSION`]; absent: 1).
     #[serde(default = "schema_v1")]
     message_schema: u32,
-    /// The run's id in its weights messages (kept when it resumes).
+    /// The run's id in its weights messages (kept when it resumes; absent in checkpoints written
+    /// before weights carried run ids: such a run is given a new id when it resumes).
+    #[serde(default)]
     run_id: String,
     global_step: u64,
     evals: Vec<EvalResult>,
@@ -524,5 +526,21 @@ impl Trainer {
             last_checkpoint: self.record.last_checkpoint().map(PathBuf::from),
             demos: c.expert_episodes,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_trainer_state_written_before_run_ids_still_reads() {
+        // trainer.json as a schema-2 trainer wrote it before weights carried a run id
+        let old = r#"{"message_schema": 2, "global_step": 26369, "evals": [], "version": 5232}"#;
+        let st: NodeState = serde_json::from_str(old).unwrap();
+        assert_eq!((st.message_schema, st.global_step, st.version), (2, 26369, 5232));
+        assert!(st.run_id.is_empty(), "an absent run id reads as empty, and Trainer::open draws a new one");
+        let older: NodeState = serde_json::from_str(r#"{"global_step": 1, "evals": [], "version": 1}"#).unwrap();
+        assert_eq!(older.message_schema, 1);
     }
 }
