@@ -38,7 +38,7 @@ pub enum Rule {
     /// Answer every Observation at once.
     Open,
     /// `--max-lead`: once a TrainerStatus has been seen,
-    /// `policy_steps − base < per_update × updates + max_lead`.
+    /// `policy_steps − base < per_update × (updates − from) + max_lead`.
     Lead {
         /// Policy steps allowed beyond `per_update × updates`.
         max_lead: u64,
@@ -52,6 +52,12 @@ pub enum Rule {
         base: u64,
         /// The count went back; `base` is set at the next step.
         rebase: bool,
+        /// Trainer updates not counted: when this node first hears of a trainer that is ahead of
+        /// its policy steps (a resumed trainer, or a policy node started into a running suite), the
+        /// lead counts from there instead of letting the node run free until it has caught up.
+        from: u64,
+        /// The first TrainerStatus arrived; `from` is set at the next step.
+        anchor: bool,
     },
     /// `--deterministic`: the k-th distinct Observation waits for weights version k + 1.
     Lockstep,
@@ -79,7 +85,15 @@ impl Gate {
             (true, _) => Rule::Lockstep,
             (false, 0) => Rule::Open,
             (false, m) => {
-                Rule::Lead { max_lead: m, per_update: steps_per_update, updates: None, base: 0, rebase: false }
+                Rule::Lead {
+                    max_lead: m,
+                    per_update: steps_per_update,
+                    updates: None,
+                    base: 0,
+                    rebase: false,
+                    from: 0,
+                    anchor: false,
+                }
             }
         };
         Ok(Gate { rule, held: None, newer_logged: false })
@@ -97,14 +111,16 @@ impl Gate {
 
     /// A TrainerStatus said the trainer has made `n` updates.
     pub fn on_status(&mut self, n: u64) {
-        if let Rule::Lead { updates, rebase, .. } = &mut self.rule {
-            if let Some(u) = *updates
-                && n < u
-            {
-                log::warn!(
-                    "the trainer's update count went back from {u} to {n} (a resumed trainer): the lead counts from here"
-                );
-                *rebase = true;
+        if let Rule::Lead { updates, rebase, anchor, .. } = &mut self.rule {
+            match *updates {
+                Some(u) if n < u => {
+                    log::warn!(
+                        "the trainer's update count went back from {u} to {n} (a resumed trainer): the lead counts from here"
+                    );
+                    *rebase = true;
+                }
+                None => *anchor = true,
+                Some(_) => {}
             }
             *updates = Some(n);
         }
@@ -117,13 +133,23 @@ impl Gate {
         }
         match &mut self.rule {
             Rule::Open => true,
-            Rule::Lead { max_lead, per_update, updates, base, rebase } => {
+            Rule::Lead { max_lead, per_update, updates, base, rebase, from, anchor } => {
                 if let (true, Some(u)) = (*rebase, *updates) {
-                    *base = p.policy_steps.saturating_sub(*per_update * u);
+                    *base = p.policy_steps.saturating_sub(per_update.saturating_mul(u));
+                    *from = 0;
                     *rebase = false;
                 }
                 let steps = p.policy_steps.saturating_sub(*base);
-                !p.policy_step || updates.is_none_or(|u| steps < *per_update * u + *max_lead)
+                if let (true, Some(u)) = (*anchor, *updates) {
+                    // the updates this node's steps so far account for; the rest are not counted
+                    let covered = steps.checked_div(*per_update).unwrap_or(u);
+                    *from = u.saturating_sub(covered);
+                    *anchor = false;
+                }
+                !p.policy_step
+                    || updates.is_none_or(|u| {
+                        steps < per_update.saturating_mul(u.saturating_sub(*from)).saturating_add(*max_lead)
+                    })
             }
             Rule::Lockstep => {
                 let want = p.answered + 1;
@@ -219,6 +245,26 @@ mod tests {
         h.on_status(5);
         h.on_status(6);
         assert!(!h.allows(p(16, 0), 0));
+    }
+
+    /// Regression (the main job resumed over DDS): a resumed trainer reported 5,232 updates to new
+    /// policy nodes at 0 steps, which then ran their sims unthrottled (a lead of 5,232 × per_update
+    /// steps) and starved the trainer of the CPU.
+    #[test]
+    fn a_trainer_ahead_of_a_new_policy_gives_it_the_lead_only() {
+        let mut g = Gate::new(10, 1, false, true).unwrap();
+        g.on_status(5232);
+        assert!(g.allows(p(0, 0), 0) && g.allows(p(9, 0), 0));
+        assert!(!g.allows(p(10, 0), 0), "a lead of 10 from where the node joined");
+        g.on_status(5233);
+        assert!(g.allows(p(10, 0), 0) && !g.allows(p(11, 0), 0));
+        // per_update 4: a node with 8 steps joining at 10 updates has 2 updates' worth of steps behind it
+        let mut h = Gate::new(3, 4, false, true).unwrap();
+        h.on_status(10);
+        assert!(h.allows(p(8, 0), 0) && h.allows(p(10, 0), 0) && !h.allows(p(11, 0), 0));
+        // and a count that then goes back still rebases
+        h.on_status(4);
+        assert!(h.allows(p(11, 0), 0));
     }
 
     #[test]
