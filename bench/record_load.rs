@@ -11,8 +11,6 @@ use std::time::{Duration, Instant};
 use clap::Parser;
 use equiarm_bag::{ReadMode, Reader};
 use equiarm_msgs::msg::Observation;
-use equiarm_msgs::sensor_msgs::Image;
-use equiarm_msgs::std_msgs::Header;
 use equiarm_nodes::ros::{RosNode, RosOptions, qos};
 
 fn vm(pid: u32, key: &str) -> f64 {
@@ -66,13 +64,8 @@ fn main() {
         for e in 0..envs {
             let mut node = RosNode::new(&format!("/env{e}"), "sim", &opts).unwrap();
             let publ = node.publisher::<Observation>("observation", qos::command()).unwrap();
-            let h = Header::default();
-            let obs = Observation {
-                env: format!("env{e}"),
-                color: Image::rgb8(h.clone(), n, n, color.clone()).unwrap(),
-                depth: Image::float32(h, n, n, &depth).unwrap(),
-                ..Default::default()
-            };
+            let mut obs = Observation { env: format!("env{e}"), ..Default::default() };
+            obs.set_frame(n, n, &color, &depth).unwrap();
             tasks.push(tokio::spawn(async move {
                 // wait until the recorder (which discovers topics every second) has matched us
                 assert!(node.wait_for_subscription(&publ, Duration::from_secs(20)).await, "recorder never subscribed");

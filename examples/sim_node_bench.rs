@@ -10,13 +10,12 @@
 //! `--delay-ms=D` makes the driver think D ms per step (a policy's inference time).
 //!
 //! NOTE: RustDDS 0.15 keeps acked samples of a reliable writer until its cache-cleaning timer, which
-//! runs every 6 s (`rtps/writer.rs`, not configurable), so up to ~12 s of samples are
-//! held. The node's peak RSS is therefore about 22 MB + 12 s × steps/s × the bytes it publishes per
-//! step. Until message schema 2 that was 0.49 MB at 152 px (one Observation on `observation` and two
-//! inside the Transition): 139 MB at 21 steps/s, 183 MB at 35, 257 MB after 500 unthrottled steps.
-//! Since schema 2 a Transition names its observations by seq (0.16 MB per step at 152 px); the bench
-//! prints the payload bytes per step it received, per topic.
-//! `--camera` also subscribes to the camera topics (the node copies images only while someone does).
+//! runs every 6 s (`rtps/writer.rs`, not configurable), so up to ~12 s of samples are held: the
+//! node's peak RSS is about 22 MB + 12 s × steps/s × the bytes it publishes per step. The bench prints
+//! those bytes per step, per topic, as its reader received them (docs/architecture.md#memory-budget
+//! has the figures of each message schema: 0.49 MB per step at 152 px in schema 1, 185 kB in schema
+//! 2, about 2 kB since schema 3 compresses the frame).
+//! `--camera` also subscribes to the camera topics (the node decodes images for them only while someone does).
 //! Run it where DDS multicast works (e.g. inside `unshare -n` with loopback multicast, as the tests do).
 
 use std::process::{Command, Stdio};
@@ -44,7 +43,7 @@ struct Args {
     /// The sim node's task.
     #[arg(default_value = "block_picking")]
     task: String,
-    /// Also subscribe to the camera topics (the node copies images only while someone does).
+    /// Also subscribe to the camera topics (the node decodes images for them only while someone does).
     #[arg(long)]
     camera: bool,
     /// Milliseconds the driver thinks per step (a policy's inference time).

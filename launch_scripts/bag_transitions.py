@@ -28,7 +28,7 @@ env, row k's next_obs is row k+1's obs unless row k ends an episode):
 
     env (N,) str, episode (N,) uint32, step (N,) uint32, obs_seq / next_obs_seq (N,) uint64,
     obs_color / next_obs_color (N, H, W, 3) uint8 (rgb8), obs_depth / next_obs_depth (N, H, W) float32
-    (metres), obs_holding / next_obs_holding (N,) bool, action (N, 5) float32 (open_ratio, dx, dy, dz,
+    (metres, each exactly the half float the Observation carries), obs_holding / next_obs_holding (N,) bool, action (N, 5) float32 (open_ratio, dx, dy, dz,
     dtheta: physical units, as commanded), action_source (N,) uint8, reward (N,) float32,
     done / timeout / expert (N,) bool
 
@@ -47,7 +47,8 @@ Usage:
 Example:
     bash launch_scripts/demo.sh --num-envs 2 --episodes 3 --out runs/demo
     python3 launch_scripts/bag_transitions.py runs/demo/bag --npz runs/demo/transitions.npz
-Needs: pip install mcap==1.6.0 mcap-ros2-support==0.6.0 numpy (tests/python/requirements.txt pins them).
+Needs: pip install mcap==1.6.0 mcap-ros2-support==0.6.0 numpy zstandard (tests/python/requirements.txt
+pins them; mcap needs zstandard already).
 Exit status: 0, or 1 when the bag holds Transitions of which none could be joined.
 """
 
@@ -260,34 +261,43 @@ def join(messages, window=200, on_transition=None):
 
 
 # --- images ---------------------------------------------------------------------------------------
+# An Observation carries its frame as `height`, `width` and two zstd frames (msgs/msg/Observation.msg):
+# `color`, rgb8 pixels, and `depth`, metres as little-endian half floats, both row-major.
 
-def rows(img, channels, itemsize):
-    """The image's bytes as an (H, W * channels * itemsize) uint8 array (the row padding cut off)."""
+MAX_SIDE = 8192
+
+
+def plane(obs, name, itemsize):
+    """The decompressed bytes of one plane, checked against the frame's sides."""
+    import zstandard
+
+    h, w = int(obs.height), int(obs.width)
+    if h > MAX_SIDE or w > MAX_SIDE:
+        raise ValueError(f"frame of {h} x {w} pixels: each side must be at most {MAX_SIDE}")
+    n = h * w * itemsize
+    data = bytes(getattr(obs, name))
+    params = zstandard.get_frame_parameters(data)
+    if params.content_size != n:
+        raise ValueError(f"{name}: a zstd frame of {params.content_size} bytes, expected {n} ({h} x {w} pixels)")
+    raw = zstandard.ZstdDecompressor().decompress(data, max_output_size=n)
+    if len(raw) != n:
+        raise ValueError(f"{name}: {len(raw)} bytes once decompressed, expected {n}")
+    return raw
+
+
+def color_array(obs):
+    """(H, W, 3) uint8 RGB of an Observation."""
     import numpy as np
 
-    h, w, step = int(img.height), int(img.width), int(img.step)
-    row = w * channels * itemsize
-    if step < row or len(img.data) < h * step:
-        raise ValueError(f"image {w}x{h} {img.encoding}: step {step}, {len(img.data)} bytes")
-    return np.frombuffer(bytes(img.data), dtype=np.uint8, count=h * step).reshape(h, step)[:, :row]
+    return np.frombuffer(plane(obs, "color", 3), dtype=np.uint8).reshape(int(obs.height), int(obs.width), 3).copy()
 
 
-def color_array(img):
-    """(H, W, 3) uint8 RGB of an rgb8 (or bgr8) sensor_msgs/Image."""
-    if img.encoding not in ("rgb8", "bgr8"):
-        raise ValueError(f"colour image encoding {img.encoding!r}, expected rgb8")
-    a = rows(img, 3, 1).reshape(int(img.height), int(img.width), 3)
-    return a[:, :, ::-1].copy() if img.encoding == "bgr8" else a.copy()
-
-
-def depth_array(img):
-    """(H, W) float32 metres of a 32FC1 sensor_msgs/Image."""
+def depth_array(obs):
+    """(H, W) float32 metres of an Observation (each value exactly the half float sent)."""
     import numpy as np
 
-    if img.encoding != "32FC1":
-        raise ValueError(f"depth image encoding {img.encoding!r}, expected 32FC1")
-    dtype = np.dtype(">f4" if img.is_bigendian else "<f4")
-    return rows(img, 1, 4).copy().view(dtype).reshape(int(img.height), int(img.width)).astype(np.float32)
+    d = np.frombuffer(plane(obs, "depth", 2), dtype="<f2")
+    return d.reshape(int(obs.height), int(obs.width)).astype(np.float32)
 
 
 class Arrays:
@@ -304,8 +314,8 @@ class Arrays:
         c["obs_seq"].append(int(t.obs_seq))
         c["next_obs_seq"].append(int(t.next_obs_seq))
         for prefix, o in (("obs", obs), ("next_obs", nxt)):
-            c[f"{prefix}_color"].append(color_array(o.color))
-            c[f"{prefix}_depth"].append(depth_array(o.depth))
+            c[f"{prefix}_color"].append(color_array(o))
+            c[f"{prefix}_depth"].append(depth_array(o))
             c[f"{prefix}_holding"].append(bool(o.holding))
         c["action"].append([float(getattr(t.action, f)) for f in ACTION_FIELDS])
         c["action_source"].append(int(t.action.source))

@@ -65,7 +65,7 @@ fn streams() -> Vec<Stream> {
     }
     vec![
         s("/env0/gripper_cmd", OfferedQos::reliable(10), 40, gripper),
-        s("/env0/observation", OfferedQos::reliable(10), 25, |k| observation(k as u64, 8, k)),
+        s("/env0/observation", OfferedQos::reliable(10), 25, |k| observation(k as u64, 64, k)),
         s("/episodes", OfferedQos::reliable(100), 12, episode),
         s("/env0/camera/color/image_raw", OfferedQos::best_effort(1), 30, |_| rgb8(8, 8, "camera")),
     ]

@@ -50,8 +50,6 @@ fn bag_eval_policy_measures_agreement_with_the_recorded_actions() {
     use equiarm_bag::qos::OfferedQos;
     use equiarm_bag::{TopicInfo, Writer, WriterOptions};
     use equiarm_msgs::msg::{GripperCommand, Observation, Transition};
-    use equiarm_msgs::sensor_msgs::Image;
-    use equiarm_msgs::std_msgs::Header;
     use equiarm_nn::burn::tensor::{Tensor, TensorData};
     use equiarm_nn::nets::Actor;
     use equiarm_train::policy_eval::network_input;
@@ -73,14 +71,9 @@ fn bag_eval_policy_measures_agreement_with_the_recorded_actions() {
                 .map(|i| ((i as u32).wrapping_mul(2654435761) ^ (k * 40503)).rotate_left(k % 31) as u8)
                 .collect();
             let depth: Vec<f32> = (0..n).map(|i| 0.4 + ((i as u32 * 7 + k * 13) % 100) as f32 * 2e-3).collect();
-            Observation {
-                seq: k as u64,
-                env: "env0".into(),
-                color: Image::rgb8(Header::default(), side, side, rgb).unwrap(),
-                depth: Image::float32(Header::default(), side, side, &depth).unwrap(),
-                holding: k % 2 == 0,
-                ..Default::default()
-            }
+            let mut o = Observation { seq: k as u64, env: "env0".into(), holding: k % 2 == 0, ..Default::default() };
+            o.set_frame(side, side, &rgb, &depth).unwrap();
+            o
         })
         .collect();
     let s = cfg.input_size;

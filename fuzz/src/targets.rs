@@ -209,13 +209,16 @@ impl Harness for SelfTest {
 /// Realistic values of a message type, beside its default, for seeds.
 trait Samples: RosMessage {
     fn samples() -> Vec<Self>;
+    /// What readers do next with an accepted message, beyond decoding it (default: nothing).
+    fn read_further(&self) {}
 }
 
 struct Cdr<M>(PhantomData<M>);
 
-impl<M: RosMessage> Harness for Cdr<M> {
+impl<M: Samples> Harness for Cdr<M> {
     fn run(&mut self, input: &[u8]) -> bool {
         if let Ok(m) = cdr::decode::<M>(input) {
+            m.read_further();
             let a = cdr::encode(&m).unwrap_or_else(|e| panic!("a decoded {} does not encode: {e}", M::TYPE_NAME));
             let again =
                 cdr::decode::<M>(&a).unwrap_or_else(|e| panic!("a re-encoded {} does not decode: {e}", M::TYPE_NAME));
@@ -367,12 +370,21 @@ impl Samples for equiarm_msgs::msg::Observation {
             env: "env0".into(),
             episode: 3,
             step: 7,
-            color: image("rgb8", 4, 4, 3),
-            depth: image("32FC1", 4, 4, 4),
+            height: 4,
+            width: 4,
+            color: zstd::bulk::compress(&image("rgb8", 4, 4, 3).data, 1).expect("compressing a seed"),
+            depth: zstd::bulk::compress(&image("16FC1", 4, 4, 2).data, 1).expect("compressing a seed"),
             holding: true,
             expert_action: command(),
             terminal: false,
         }]
+    }
+
+    /// The frame is read as the policy and the trainer read it (its planes decompressed and checked);
+    /// a bad one is an error, never a panic or an allocation beyond the sides it claims.
+    fn read_further(&self) {
+        let _ = self.color_rgb8();
+        let _ = self.depth_f16();
     }
 }
 

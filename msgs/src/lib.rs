@@ -25,8 +25,10 @@
 
 pub mod cdr;
 mod image;
+pub mod obs_frame;
 
 pub use image::ImageError;
+pub use obs_frame::ObsFrameError;
 
 use serde::{Serialize, de::DeserializeOwned};
 
@@ -40,7 +42,9 @@ include!(concat!(env!("OUT_DIR"), "/messages.rs"));
 /// 2: a Transition names its observations by seq (`obs_seq`, `next_obs_seq`) instead of carrying
 /// them; an Observation says whether it is an episode's `terminal` frame; PolicyWeights carry the
 /// trainer's `run_id`, within which versions only grow.
-pub const SCHEMA_VERSION: u32 = 2;
+/// 3: an Observation carries its frame compressed ([`obs_frame`]: `height`, `width`, zstd planes of
+/// rgb8 colour and half-float depth) instead of two `sensor_msgs/Image`s.
+pub const SCHEMA_VERSION: u32 = 3;
 
 /// A ROS 2 message type: its names and its definition text.
 pub trait RosMessage: Serialize + DeserializeOwned + Clone + Default + std::fmt::Debug + Send + Sync + 'static {

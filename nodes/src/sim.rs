@@ -27,15 +27,19 @@
 //! One env per process (run N processes in `/env0 … /envN-1` for N envs). Episodes are `eval` only
 //! with `--eval`.
 
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::{Context as _, bail};
 use equiarm_msgs::builtin_interfaces::Time;
 use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, Transition};
 use equiarm_msgs::rosgraph_msgs::Clock;
-use equiarm_msgs::sensor_msgs::{CameraInfo, Image};
+use equiarm_msgs::{
+    sensor_msgs::{CameraInfo, Image},
+    std_msgs::Header,
+};
 use equiarm_sim::{Env, EnvConfig, TaskKind, ViewPreset};
-use equiarm_train::stepper::{SimStats, Step, Stepper};
+use equiarm_train::stepper::{CAMERA_FRAME, SimStats, Step, Stepper};
 use log::{debug, info};
 
 use crate::ros::{Publisher, RosNode, RosOptions, qos, shutdown_signal};
@@ -206,12 +210,13 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
         }
     }
     info!("{}: {:?}", node.name(), sim.stats);
-    // Give reliable readers a moment to acknowledge the last samples before the writers go away.
-    tokio::time::sleep(Duration::from_millis(200)).await;
+    // Reliable readers get the last samples before the writers go: a lost one is sent again after
+    // the writer's next heartbeat (RustDDS: every 1 s once all was acknowledged).
+    tokio::time::sleep(Duration::from_millis(1200)).await;
     Ok(sim.stats)
 }
 
-/// The camera topics. Images are copied out of the Observation only while someone subscribes.
+/// The camera topics. Images are decoded from the Observation only while someone subscribes.
 struct CameraPublishers {
     color: Publisher<Image>,
     depth: Publisher<Image>,
@@ -240,28 +245,22 @@ impl CameraPublishers {
         })
     }
 
-    /// Publishes the frame of `obs` (same header stamp as the Observation).
+    /// Publishes the frame of `obs` (its stamp, the camera's frame id; depth at the Observation's precision).
     async fn publish(&self, node: &RosNode, obs: &Observation) -> anyhow::Result<()> {
+        let header = Header::new(obs.header.stamp.clone(), CAMERA_FRAME);
         if self.color.subscription_count(node) > 0 {
-            self.color.publish(obs.color.clone()).await?;
+            self.color.publish(obs.color_image(header.clone())?).await?;
         }
         if self.depth.subscription_count(node) > 0 {
-            self.depth.publish(obs.depth.clone()).await?;
+            self.depth.publish(obs.depth_image(header.clone())?).await?;
         }
-        let header = obs.color.header.clone();
         self.info.publish(CameraInfo { header, ..self.camera_info.clone() }).await
     }
 }
 
 /// `equiarm sim snapshot`: writes the colour, depth and segmentation PNGs of `task` after a reset with
 /// `seed` and `steps` expert steps into `out`; returns the paths written.
-pub fn snapshot(
-    task: &str,
-    seed: u64,
-    steps: u32,
-    view: Option<&str>,
-    out: &std::path::Path,
-) -> anyhow::Result<Vec<std::path::PathBuf>> {
+pub fn snapshot(task: &str, seed: u64, steps: u32, view: Option<&str>, out: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let mut cfg = EnvConfig::new(parse_task(task)?);
     if let Some(v) = view {
         cfg.camera = parse_view(v)?.config();

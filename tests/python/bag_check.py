@@ -30,7 +30,7 @@ def synthetic(topic: str, k: int):
                                   dx=k * -0.5, dy=0.125, dz=NAN32 if k == 0 else 0.0, dtheta=float(k),
                                   source=k % 4)
     if topic.endswith("observation"):
-        return golden.observation(k, 8, k)
+        return golden.observation(k, 64, k)
     if topic.endswith("episodes"):
         success = k % 3 == 0
         return idl.EpisodeResult(header=golden.header(k, 0, "world"), env=f"env{k % 2}", task="block_pulling",

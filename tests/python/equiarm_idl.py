@@ -90,8 +90,10 @@ class Observation(IdlStruct, typename="equiarm_msgs::msg::dds_::Observation_"):
     env: str = ""
     episode: uint32 = 0
     step: uint32 = 0
-    color: Image = field(default_factory=Image)
-    depth: Image = field(default_factory=Image)
+    height: uint32 = 0
+    width: uint32 = 0
+    color: sequence[uint8] = field(default_factory=bytes)
+    depth: sequence[uint8] = field(default_factory=bytes)
     holding: bool = False
     expert_action: GripperCommand = field(default_factory=GripperCommand)
     terminal: bool = False
@@ -160,7 +162,7 @@ class TrainerStatus(IdlStruct, typename="equiarm_msgs::msg::dds_::TrainerStatus_
 ALL = [Time, Clock, Header, Image, RegionOfInterest, CameraInfo, GripperCommand, Observation, Transition,
        EpisodeResult, PolicyWeights, TrainerStatus]
 
-for _cls, _member in ((Image, "data"), (PolicyWeights, "data")):
+for _cls, _member in ((Image, "data"), (Observation, "color"), (Observation, "depth"), (PolicyWeights, "data")):
     _cls.__idl__.populate()
     for _m in (_cls.__idl__.v1_machine, _cls.__idl__.v2_machine):
         _m.members_machines[_member] = BytesMachine()

@@ -98,8 +98,10 @@ def command_typical():
 
 def observation(seq, size, seed):
     """terminal = True (the non-default value of the last field, so its place on the wire is checked)."""
+    # planes of arbitrary bytes (the CDR layout is checked here, the compression by the Rust
+    # obs_frame tests); colour of an odd length, so the depth's length needs alignment padding
     return idl.Observation(header=header(3, 4, "world"), seq=seq, env="env0", episode=3, step=49,
-                           color=rgb8(size, size, "camera"), depth=depth(size, size, "camera", seed),
+                           height=size, width=size, color=ramp(size * 3 + 1, 7, 3), depth=hash_words(size, seed),
                            holding=True, expert_action=command_typical(), terminal=True)
 
 

@@ -85,8 +85,12 @@ pub fn observation(seq: u64, size: u32, seed: u32) -> Observation {
         env: "env0".into(),
         episode: 3,
         step: 49,
-        color: rgb8(size, size, "camera"),
-        depth: depth(size, size, "camera", seed),
+        // planes of arbitrary bytes (the CDR layout is checked here, the compression in obs_frame's
+        // tests); colour of an odd length, so the depth's length needs alignment padding
+        height: size,
+        width: size,
+        color: ramp(size as usize * 3 + 1, 7, 3),
+        depth: hash_words(size as usize, seed),
         holding: true,
         expert_action: command_typical(),
         terminal: true,

@@ -11,7 +11,6 @@ use clap::Parser;
 use equiarm_bag::qos::OfferedQos;
 use equiarm_bag::{Compression, TopicInfo, Writer, WriterOptions};
 use equiarm_msgs::msg::Observation;
-use equiarm_msgs::sensor_msgs::Image;
 use equiarm_msgs::std_msgs::Header;
 use equiarm_msgs::{builtin_interfaces::Time, cdr};
 
@@ -27,15 +26,15 @@ fn sim_frames(n: usize) -> Vec<Observation> {
         let side = (obs.color.len() / 3) as f64;
         let side = side.sqrt() as u32;
         let h = Header { stamp: Time { sec: out.len() as i32, nanosec: 0 }, frame_id: "world".into() };
-        out.push(Observation {
-            header: h.clone(),
+        let mut o = Observation {
+            header: h,
             seq: out.len() as u64,
             env: "env0".into(),
-            color: Image::rgb8(h.clone(), side, side, obs.color.clone()).unwrap(),
-            depth: Image::float32(h, side, side, &obs.depth).unwrap(),
             holding: obs.holding,
             ..Default::default()
-        });
+        };
+        o.set_frame(side, side, &obs.color, &obs.depth).unwrap();
+        out.push(o);
         let r = env.step(&obs.expert_action).unwrap();
         obs = if r.done {
             seed += 1;

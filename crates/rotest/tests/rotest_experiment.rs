@@ -137,21 +137,23 @@ fn values(t: Tensor<2>) -> Vec<f32> {
     t.into_data().try_to_vec::<f32>().unwrap()
 }
 
-#[test]
-fn a_trained_c8_net_predicts_the_same_class_for_both_images_rotated_by_90_degrees() {
-    let ds = data("none", 19, 24, 5);
-    let out = scratch("train_equi");
-    let cfg = TrainConfig {
+/// A net of hidden 8 on 16 px crops, trained on few pairs in batches of 8 (the tests' size).
+fn tiny(model: ModelKind, train_pairs: usize, seed: u64) -> TrainConfig {
+    TrainConfig {
         hidden: 8,
         input: 16,
         val_pairs: 4,
         test_pairs: 4,
         batch: 8,
-        min_epochs: 2,
-        max_epochs: 2,
-        lr: 1e-3,
-        ..TrainConfig::paper(ModelKind::Equi, 16, 0)
-    };
+        ..TrainConfig::paper(model, train_pairs, seed)
+    }
+}
+
+#[test]
+fn a_trained_c8_net_predicts_the_same_class_for_both_images_rotated_by_90_degrees() {
+    let ds = data("none", 19, 24, 5);
+    let out = scratch("train_equi");
+    let cfg = TrainConfig { min_epochs: 2, max_epochs: 2, lr: 1e-3, ..tiny(ModelKind::Equi, 16, 0) };
     let rec = train::run(&ds, &cfg, &Device::flex(), &out, &mut |_| {}).unwrap();
     assert_eq!(rec.history.len(), 2);
     assert!(rec.history.iter().all(|e| e.loss.is_finite()));
@@ -205,18 +207,7 @@ fn a_trained_c8_net_predicts_the_same_class_for_both_images_rotated_by_90_degree
 fn early_stopping_waits_for_patience_after_min_epochs_and_reports_the_best_epoch() {
     let ds = data("none", 19, 16, 6);
     for (min_epochs, expect) in [(2, 3), (5, 5)] {
-        let cfg = TrainConfig {
-            hidden: 8,
-            input: 16,
-            val_pairs: 4,
-            test_pairs: 4,
-            batch: 8,
-            lr: 1e-12,
-            min_epochs,
-            patience: 2,
-            max_epochs: 50,
-            ..TrainConfig::paper(ModelKind::Cnn, 8, 1)
-        };
+        let cfg = TrainConfig { lr: 1e-12, min_epochs, patience: 2, max_epochs: 50, ..tiny(ModelKind::Cnn, 8, 1) };
         let rec = train::run(&ds, &cfg, &Device::flex(), &scratch(&format!("stop{min_epochs}")), &mut |_| {}).unwrap();
         assert_eq!(rec.history.len(), expect, "min_epochs {min_epochs}");
         assert!(rec.history.iter().all(|e| e.val_acc == rec.history[0].val_acc));

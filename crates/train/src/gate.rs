@@ -84,17 +84,15 @@ impl Gate {
             ),
             (true, _) => Rule::Lockstep,
             (false, 0) => Rule::Open,
-            (false, m) => {
-                Rule::Lead {
-                    max_lead: m,
-                    per_update: steps_per_update,
-                    updates: None,
-                    base: 0,
-                    rebase: false,
-                    from: 0,
-                    anchor: false,
-                }
-            }
+            (false, m) => Rule::Lead {
+                max_lead: m,
+                per_update: steps_per_update,
+                updates: None,
+                base: 0,
+                rebase: false,
+                from: 0,
+                anchor: false,
+            },
         };
         Ok(Gate { rule, held: None, newer_logged: false })
     }

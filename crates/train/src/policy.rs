@@ -16,7 +16,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Context as _;
-use equiarm_msgs::ImageError;
+use equiarm_msgs::ObsFrameError;
 use equiarm_msgs::msg::{GripperCommand, Observation, PolicyWeights};
 use equiarm_sac::agent::{ActMode, Agent, AgentConfig, ModelKind};
 use equiarm_sac::frame::{FrameError, StoredFrame};
@@ -41,20 +41,9 @@ pub enum PolicyMode {
 /// Why an Observation's images make no frame (or, at the trainer, not one of the run's size).
 #[derive(Debug, thiserror::Error)]
 pub enum BadFrame {
-    /// The colour image is not rgb8 of its stated size.
-    #[error("colour: {0}")]
-    Color(ImageError),
-    /// The depth image is not 32FC1 of its stated size.
-    #[error("depth: {0}")]
-    Depth(ImageError),
-    /// Colour and depth differ in size.
-    #[error("colour is {}×{}, depth {}×{}", color.0, color.1, depth.0, depth.1)]
-    Mismatch {
-        /// Colour width and height.
-        color: (u32, u32),
-        /// Depth width and height.
-        depth: (u32, u32),
-    },
+    /// A plane is not the zstd frame of its stated size (`equiarm_msgs::obs_frame`).
+    #[error(transparent)]
+    Planes(#[from] ObsFrameError),
     /// Not square, too large, or a depth that is not finite.
     #[error(transparent)]
     Frame(#[from] FrameError),
@@ -84,23 +73,14 @@ pub fn action_of(c: &GripperCommand) -> Action {
     Action::new(c.open_ratio, c.dx, c.dy, c.dz, c.dtheta)
 }
 
-/// The frame of an Observation (rgb8 colour, 32FC1 depth, holding); the error says what is wrong.
+/// The frame of an Observation (rgb8 colour, half-float depth, holding), as the replay stores it;
+/// the error says what is wrong.
 pub fn frame_of(obs: &Observation) -> Result<StoredFrame, BadFrame> {
-    let color = obs.color.rgb8_data().map_err(BadFrame::Color)?;
-    let depth = obs.depth.float32_values().map_err(BadFrame::Depth)?;
-    if (obs.color.width, obs.color.height) != (obs.depth.width, obs.depth.height) {
-        return Err(BadFrame::Mismatch {
-            color: (obs.color.width, obs.color.height),
-            depth: (obs.depth.width, obs.depth.height),
-        });
+    let (width, height) = (obs.width as usize, obs.height as usize);
+    if width != height {
+        return Err(FrameError::NotSquare { width, height }.into());
     }
-    Ok(StoredFrame::from_image(
-        obs.color.width as usize,
-        obs.color.height as usize,
-        color.to_vec(),
-        &depth,
-        obs.holding,
-    )?)
+    Ok(StoredFrame::from_f16(width, obs.color_rgb8()?, obs.depth_f16()?, obs.holding)?)
 }
 
 /// What became of a PolicyWeights sample.

@@ -1,6 +1,6 @@
 //! The sim node's logic without DDS: an env stepped by `GripperCommand`s, as messages. Each
-//! observation becomes an `Observation` (seq, env, episode, step, rgb8 colour, 32FC1 depth in
-//! metres, holding, the expert's action with `source = EXPERT` and `obs_seq = seq`); each step a
+//! observation becomes an `Observation` (seq, env, episode, step, the compressed frame of
+//! `equiarm_msgs::obs_frame`: rgb8 colour and half-float depth in metres, holding, the expert's action with `source = EXPERT` and `obs_seq = seq`); each step a
 //! `Transition`; each episode's end an `EpisodeResult`.
 //!
 //! `seq` counts the observations this env made, from 0. A Transition names its two observations by
@@ -12,7 +12,6 @@
 
 use equiarm_msgs::builtin_interfaces::Time;
 use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, Transition};
-use equiarm_msgs::sensor_msgs::Image;
 use equiarm_msgs::std_msgs::Header;
 use equiarm_sim::{Env, EnvConfig, SimError, rng::Rng};
 
@@ -34,14 +33,9 @@ pub enum StepError {
         /// The simulator's error.
         source: SimError,
     },
-    /// An image did not fit its message.
-    #[error("{what} image: {source}")]
-    Image {
-        /// Colour or depth.
-        what: &'static str,
-        /// The message's error.
-        source: equiarm_msgs::ImageError,
-    },
+    /// The camera frame did not fit its message.
+    #[error("the camera frame: {0}")]
+    Frame(#[from] equiarm_msgs::ObsFrameError),
 }
 
 /// Simulated time: `ticks * step_ns` nanoseconds.
@@ -259,8 +253,7 @@ impl Stepper {
     }
 }
 
-/// The Observation message of a library observation. Colour moves into its message; depth is
-/// encoded once as little-endian float32.
+/// The Observation message of a library observation (its frame compressed once, here).
 pub fn observation(
     o: equiarm_sim::Observation,
     seq: u64,
@@ -268,19 +261,13 @@ pub fn observation(
     episode: u32,
     stamp: Time,
 ) -> Result<Observation, StepError> {
-    let (h, w) = (o.height as u32, o.width as u32);
-    let cam_header = Header::new(stamp.clone(), CAMERA_FRAME);
     let header = Header::new(stamp, WORLD_FRAME);
     let a = o.expert_action;
-    Ok(Observation {
+    let mut msg = Observation {
         seq,
         env: env.to_string(),
         episode,
         step: o.step,
-        color: Image::rgb8(cam_header.clone(), h, w, o.color)
-            .map_err(|source| StepError::Image { what: "colour", source })?,
-        depth: Image::float32(cam_header, h, w, &o.depth)
-            .map_err(|source| StepError::Image { what: "depth", source })?,
         holding: o.holding,
         expert_action: GripperCommand {
             header: header.clone(),
@@ -294,7 +281,10 @@ pub fn observation(
         },
         header,
         terminal: false,
-    })
+        ..Default::default()
+    };
+    msg.set_frame(o.height as u32, o.width as u32, &o.color, &o.depth)?;
+    Ok(msg)
 }
 
 #[cfg(test)]
