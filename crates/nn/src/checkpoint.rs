@@ -119,7 +119,21 @@ pub fn load_bytes<M: Module>(module: M, bytes: Vec<u8>, label: &str) -> Result<M
     load_checked(module, SafetensorsStore::from_bytes(Some(bytes)), Path::new(label))
 }
 
-fn load_checked<M: Module>(mut module: M, mut store: SafetensorsStore, path: &Path) -> Result<M, CheckpointError> {
+fn load_checked<M: Module>(module: M, store: SafetensorsStore, path: &Path) -> Result<M, CheckpointError> {
+    let devices = module.devices();
+    let loaded = load_into(module, store, path);
+    // burn's autodiff (0.22) forgets the graph nodes of parameters that were replaced only during a
+    // backward pass (`runtime/server.rs`), so a process that loads weights into a trainable module
+    // and never trains (a policy node, one load per weights message) kept about 20 kB per load of
+    // the reduced actor. A one-element backward on that device lets it collect them.
+    for device in devices.iter().filter(|d| d.is_autodiff()) {
+        let one = burn::tensor::Tensor::<1>::from_floats([1.0f32], device).require_grad();
+        let _ = one.sum().backward();
+    }
+    loaded
+}
+
+fn load_into<M: Module>(mut module: M, mut store: SafetensorsStore, path: &Path) -> Result<M, CheckpointError> {
     let store_err = |e: &dyn std::fmt::Display| CheckpointError::Store { path: path.into(), message: e.to_string() };
     let in_file: Vec<(String, Vec<usize>)> = store
         .get_all_tensors()
