@@ -28,7 +28,8 @@
 #                       (no --max-lead); with one seed two runs record the same /transitions of the
 #                       training envs and end with the same weights. The eval pair is not lock-stepped:
 #                       it evaluates whatever weights are current, so evaluations may differ.
-#   -- ARGS...          passed on to `equiarm train`
+#   -- ARGS...          passed on to `equiarm train`; `--run-dir RUN -- --resume RUN` continues the run
+#                       in RUN (its recorder writes a new bag beside the first: RUN/bag-2, ...)
 # Environment: ROS_DOMAIN_ID (default 0), ROS_LOCALHOST_ONLY (default 1: loopback only),
 # EQUIARM_BIN (use this binary instead of building), CARGO_TARGET_DIR.
 #
