@@ -56,7 +56,7 @@ while [ $# -gt 0 ]; do
     --force) force=1; shift ;;
     --deterministic) det=1; shift ;;
     --) shift; extra=("$@"); break ;;
-    -h|--help) sed -n '2,35p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,36p' "$0"; exit 0 ;;
     *) echo "train.sh: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
