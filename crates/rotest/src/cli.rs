@@ -90,8 +90,9 @@ pub enum RotestCommand {
     },
     /// Run the experiment: for each setting, generate its dataset if `DATA/<setting>` has none, then
     /// train Equi, CNN and CNN + image transformations (img-trans = N) for each N and seed whose
-    /// `RUNS/<setting>/<variant>/<N>/s<seed>/run.json` does not exist yet (so an interrupted grid
-    /// continues where it stopped), then write the report.
+    /// `RUNS/<setting>/<variant>/<N>/s<seed>/run.json` does not exist yet and that the report's
+    /// archive (`REPORT/rotest_runs.json`) does not hold (so an interrupted grid continues where it
+    /// stopped, on this machine or from a committed report), then write the report.
     #[command(
         after_help = "Example (a short schedule for 2 cores):\n  equiarm rotest grid --data data/rotest --runs runs/rotest --sizes 100,400 --seeds 0,1,2,3 --lr 1e-3 --min-epochs 20 --patience 20 --max-epochs 100"
     )]
@@ -134,7 +135,8 @@ pub enum RotestCommand {
         #[arg(long)]
         disc: bool,
     },
-    /// Write the table (rotest.md) and one figure per setting from every run.json below RUNS.
+    /// Write the table (rotest.md), one figure per setting and the archive (rotest_runs.json) from
+    /// every run.json below RUNS and the runs already archived in OUT.
     Report {
         /// Directory searched recursively for run.json files.
         runs: PathBuf,
@@ -211,8 +213,13 @@ impl TrainOpts {
 
 fn print_epoch(e: &crate::train::EpochRecord) {
     eprintln!(
-        "epoch {:4}  loss {:.4}  train {:.3}  val {:.3}  test {:.3}  {:.1} s",
-        e.epoch, e.loss, e.train_acc, e.val_acc, e.test_acc, e.seconds
+        "epoch {:4}  loss {:.4}  train {:.3}  val {:.3}  test {}  {:.1} s",
+        e.epoch,
+        e.loss,
+        e.train_acc,
+        e.val_acc,
+        e.test_acc.map_or("  -  ".to_string(), |t| format!("{t:.3}")),
+        e.seconds
     );
 }
 
@@ -318,6 +325,10 @@ pub fn run(cmd: RotestCommand) -> Result<()> {
                     println!("{}", ds.write(&dir)?.display());
                 }
                 let ds = Dataset::read(&dir, None)?;
+                let archived: BTreeMap<_, _> = crate::report::read_archive(&report.join(crate::report::ARCHIVE_FILE))?
+                    .into_iter()
+                    .map(|r| (crate::report::run_key(&r), r.config))
+                    .collect();
                 for &n in &sizes {
                     for &seed in &seeds {
                         for (model, img_trans, name) in
@@ -328,6 +339,19 @@ pub fn run(cmd: RotestCommand) -> Result<()> {
                                 continue;
                             }
                             let cfg = opts.config(model, n, img_trans, seed)?;
+                            let planned = crate::train::RunRecord {
+                                config: cfg.clone(),
+                                corrupt: c.name(),
+                                data_seed: 0,
+                                history: Vec::new(),
+                                best_epoch: 0,
+                                best_val_acc: 0.0,
+                                test_acc: 0.0,
+                                train_samples: 0,
+                            };
+                            if archived.get(&crate::report::run_key(&planned)) == Some(&cfg) {
+                                continue;
+                            }
                             let r = crate::train::run(&ds, &cfg, &device, &out, &mut |_| {})?;
                             println!("{}", summary(&r));
                         }

@@ -209,11 +209,39 @@ pub fn figure(
     img.save(path).map_err(|e| err(e.to_string()))
 }
 
-/// Writes `out/rotest.md` (the table) and `out/rotest_<setting>.png` (one figure per setting) from
-/// the runs below `runs_dir`; `bounds` gives the invariant-classifier bound per setting (drawn where
-/// below 1). Returns the files written.
+/// The archive a report writes beside its table: every run's record without its epoch history
+/// (a few hundred bytes a run). Committed with the report, it lets a checkout on another machine
+/// skip those runs (`rotest grid`) and draw them again (`rotest report`).
+pub const ARCHIVE_FILE: &str = "rotest_runs.json";
+
+/// The key that names a run in the grid: setting, variant, training pairs, seed.
+pub fn run_key(r: &RunRecord) -> (String, String, usize, u64) {
+    (r.corrupt.clone(), variant(r), r.config.train_pairs, r.config.seed)
+}
+
+/// The archived runs in `path` (none if the file does not exist).
+pub fn read_archive(path: &Path) -> Result<Vec<RunRecord>> {
+    if !path.is_file() {
+        return Ok(Vec::new());
+    }
+    let text = std::fs::read(path).map_err(io(path))?;
+    serde_json::from_slice(&text)
+        .map_err(|e| RotestError::Format { path: path.to_path_buf(), message: format!("not a run archive: {e}") })
+}
+
+/// Writes `out/rotest.md` (the table), `out/rotest_<setting>.png` (one figure per setting) and the
+/// archive `out/rotest_runs.json` from the runs below `runs_dir` and the runs of the archive already
+/// in `out` that `runs_dir` does not have; `bounds` gives the invariant-classifier bound per setting
+/// (drawn where below 1). Returns the files written.
 pub fn write(runs_dir: &Path, out: &Path, bounds: &BTreeMap<String, f64>) -> Result<Vec<PathBuf>> {
-    let runs = collect_runs(runs_dir)?;
+    let mut runs = if runs_dir.is_dir() { collect_runs(runs_dir)? } else { Vec::new() };
+    let archive = out.join(ARCHIVE_FILE);
+    let have: std::collections::BTreeSet<_> = runs.iter().map(|(_, r)| run_key(r)).collect();
+    for r in read_archive(&archive)? {
+        if !have.contains(&run_key(&r)) {
+            runs.push((archive.clone(), r));
+        }
+    }
     if runs.is_empty() {
         return Err(RotestError::Format {
             path: runs_dir.to_path_buf(),
@@ -231,7 +259,12 @@ pub fn write(runs_dir: &Path, out: &Path, bounds: &BTreeMap<String, f64>) -> Res
         markdown(&t)
     );
     std::fs::write(&md, text).map_err(io(&md))?;
-    let mut files = vec![md];
+    let mut kept: Vec<RunRecord> = runs.iter().map(|(_, r)| RunRecord { history: Vec::new(), ..r.clone() }).collect();
+    kept.sort_by_key(run_key);
+    let json = serde_json::to_vec_pretty(&kept)
+        .map_err(|e| RotestError::Format { path: archive.clone(), message: e.to_string() })?;
+    std::fs::write(&archive, json).map_err(io(&archive))?;
+    let mut files = vec![md, archive];
     for (setting, by_var) in &t {
         let p = out.join(format!("rotest_{}.png", setting.replace(',', "+")));
         figure(&p, setting, by_var, bounds.get(setting).copied())?;
@@ -248,7 +281,7 @@ mod tests {
     fn record(model: ModelKind, n: usize, img_trans: usize, seed: u64, acc: f64) -> RunRecord {
         let mut config = TrainConfig::paper(model, n, seed);
         config.img_trans = img_trans;
-        let e = EpochRecord { epoch: 1, loss: 1.0, train_acc: acc, val_acc: acc, test_acc: acc, seconds: 1.0 };
+        let e = EpochRecord { epoch: 1, loss: 1.0, train_acc: acc, val_acc: acc, test_acc: Some(acc), seconds: 1.0 };
         RunRecord {
             config,
             corrupt: "condition_reverse".into(),
@@ -262,7 +295,8 @@ mod tests {
     }
 
     /// Run files in nested directories are found, grouped by variant and N, and averaged; the
-    /// table and the figure are written; an empty directory is an error naming it.
+    /// table, the figure and the archive are written, and the archive alone gives the same table;
+    /// an empty directory (and no archive) is an error naming it.
     #[test]
     fn report_groups_runs_and_writes_table_and_figure() {
         let root = std::env::temp_dir().join(format!("equiarm_rotest_report_{}", std::process::id()));
@@ -281,13 +315,20 @@ mod tests {
         let out = root.join("out");
         let bounds = BTreeMap::from([("condition_reverse".to_string(), 0.625)]);
         let files = write(&root.join("runs"), &out, &bounds).unwrap();
-        assert_eq!(files.len(), 2);
+        assert_eq!(files.len(), 3);
         let md = std::fs::read_to_string(out.join("rotest.md")).unwrap();
         assert!(md.contains("| condition_reverse | 100 | 70.0 ± 0.0 (1) | – | 55.0 ± 5.0 (2) |"), "{md}");
         assert!(md.contains("| condition_reverse | 400 | – | 80.0 ± 0.0 (1) | – |"), "{md}");
         assert!(image::open(out.join("rotest_condition_reverse.png")).is_ok());
+        // the archive alone (no run directories) gives the same table
+        let archived = read_archive(&out.join(ARCHIVE_FILE)).unwrap();
+        assert_eq!(archived.len(), 4);
+        assert!(archived.iter().all(|r| r.history.is_empty()));
+        std::fs::remove_dir_all(root.join("runs")).unwrap();
+        write(&root.join("runs"), &out, &bounds).unwrap();
+        assert_eq!(std::fs::read_to_string(out.join("rotest.md")).unwrap(), md);
         std::fs::create_dir_all(root.join("empty")).unwrap();
-        let e = write(&root.join("empty"), &out, &bounds).unwrap_err().to_string();
+        let e = write(&root.join("empty"), &root.join("out2"), &bounds).unwrap_err().to_string();
         assert!(e.contains("no run.json") && e.contains("empty"), "{e}");
         let _ = std::fs::remove_dir_all(&root);
     }
