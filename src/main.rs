@@ -75,6 +75,13 @@ enum Command {
         after_help = "Examples:\n  equiarm rotest data --corrupt grid,side --pairs 2000 --seed 0 -o data/rotest/side+grid\n  equiarm rotest snapshots -o docs/rotest\n  equiarm rotest bound data/rotest/condition_reverse\n  equiarm rotest train --data data/rotest/none --model equi --train-pairs 400 --seed 0 -o runs/rotest/none/equi/400/s0\n  equiarm rotest grid --data data/rotest --runs runs/rotest --sizes 100,400\n  equiarm rotest invariance --data data/rotest/none runs/rotest/none/equi/400/s0\n  equiarm rotest report runs/rotest --data data/rotest"
     )]
     Rotest(equiarm_rotest::cli::RotestCommand),
+    /// The paper's RL experiments as named grids of in-process runs (experiments/NAME.toml,
+    /// docs/experiment_runner.md): run them a few at a time, resume after an interruption, report.
+    #[command(
+        subcommand,
+        after_help = "Examples:\n  equiarm experiment run tasks --parallel 2\n  equiarm experiment status tasks\n  equiarm experiment report tasks"
+    )]
+    Experiment(equiarm_experiment::cli::ExperimentCommand),
 }
 
 #[derive(clap::Args)]
@@ -308,6 +315,13 @@ fn main() -> std::process::ExitCode {
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Rotest(c) => equiarm_rotest::cli::run(c)?,
+        Command::Experiment(c) => {
+            let stop = equiarm_nodes::signals::stop_flag();
+            let code = equiarm_experiment::cli::run(c, &move || stop.load(std::sync::atomic::Ordering::Relaxed))?;
+            if code != 0 {
+                std::process::exit(code);
+            }
+        }
         Command::Msg(MsgCommand::List) => {
             for t in ALL_TYPES {
                 println!("{:<36} {}", t.type_name, t.dds_type_name);
@@ -530,8 +544,9 @@ mod tests {
                     panic!("example '{line}' does not parse: {e}");
                 }
             }
-            // Every leaf command under it is shown by at least one example.
-            for leaf in sub.get_subcommands().filter(|c| c.get_name() != "help") {
+            // Every leaf command under it is shown by at least one example (hidden, internal ones
+            // such as `experiment run-one` excepted).
+            for leaf in sub.get_subcommands().filter(|c| c.get_name() != "help" && !c.is_hide_set()) {
                 let shown = lines.iter().any(|l| l.split_whitespace().nth(2) == Some(leaf.get_name()));
                 assert!(shown, "no example of `equiarm {} {}`", sub.get_name(), leaf.get_name());
             }

@@ -43,6 +43,16 @@ pub fn seconds(s: &str) -> Result<f64, BadValue> {
     }
 }
 
+/// A duration in minutes: finite, above 0, at most [`MAX_SECONDS`] / 60.
+pub fn positive_minutes(s: &str) -> Result<f64, BadValue> {
+    let v = number(s, "number of minutes")?;
+    if v > 0.0 && v <= MAX_SECONDS / 60.0 {
+        Ok(v)
+    } else {
+        Err(BadValue::OutOfRange { given: format!("{s} min"), range: format!("(0, {}] (30 days)", MAX_SECONDS / 60.0) })
+    }
+}
+
 /// A whole number of seconds: 1 ..= [`MAX_SECONDS`].
 pub fn whole_seconds(s: &str) -> Result<u64, BadValue> {
     bounded(s, "s", 1, MAX_SECONDS as u64)
@@ -115,6 +125,8 @@ mod tests {
         assert!(millis("0").unwrap_err().to_string().contains("1..=3600000"));
         assert!(millis("18446744073709551615").unwrap_err().to_string().contains("outside"));
         assert!(millis("-5").is_err());
+        assert_eq!(positive_minutes("10"), Ok(10.0));
+        assert!(positive_minutes("0").is_err() && positive_minutes("inf").is_err() && positive_minutes("1e9").is_err());
         assert_eq!(whole_seconds("60"), Ok(60));
         assert!(whole_seconds("0").is_err() && whole_seconds("2592001").is_err());
         assert_eq!(millis_or_zero("0"), Ok(0));

@@ -70,12 +70,23 @@ pub struct TrainArgs {
     /// Rendered frame size and network input size, as FRAME:INPUT (e.g. 76:64, 152:128).
     #[arg(long)]
     pub image: Option<String>,
+    /// Camera preset: side (the paper's oblique view), angle15 … angle90 (the view-angle sweep).
+    #[arg(long)]
+    pub view: Option<String>,
+    /// Symmetry corruptions: none, or a comma-separated list of random_reflection,
+    /// occlusion_projection, gripper_only (docs/paper.md §5).
+    #[arg(long)]
+    pub corrupt: Option<String>,
     /// Augmentation: rad, drq (K = M = 2) or center.
     #[arg(long)]
     pub augmentation: Option<String>,
     /// Checkpoint every N updates.
     #[arg(long)]
     pub checkpoint_every: Option<u64>,
+    /// In-process: also checkpoint whenever this many minutes of training passed since the last
+    /// checkpoint (for slow configs, whose checkpoint_every updates take long).
+    #[arg(long, value_parser = crate::cli_values::positive_minutes)]
+    pub checkpoint_minutes: Option<f64>,
     /// Transitions in the replay before the first update.
     #[arg(long)]
     pub training_starts: Option<usize>,
@@ -179,6 +190,12 @@ impl TrainArgs {
             cfg.image_size = f.parse().with_context(|| format!("--image `{img}`: frame size"))?;
             cfg.agent.input_size = i.parse().with_context(|| format!("--image `{img}`: input size"))?;
         }
+        if let Some(v) = &self.view {
+            cfg.view = v.clone();
+        }
+        if let Some(c) = &self.corrupt {
+            cfg.corruption = c.clone();
+        }
         if let Some(a) = &self.augmentation {
             cfg.augmentation = match a.as_str() {
                 "rad" => Augmentation::Rad,
@@ -211,6 +228,7 @@ pub fn run_in_process(args: &TrainArgs, cfg: TrainConfig) -> anyhow::Result<RunS
         progress: !args.quiet,
         device: args.device.clone(),
         force: args.force,
+        checkpoint_secs: args.checkpoint_minutes.map(|m| m * 60.0),
     };
     Ok(equiarm_train::inprocess::run(cfg, &opts, &move || stop.load(std::sync::atomic::Ordering::Relaxed))?)
 }
@@ -242,6 +260,8 @@ mod tests {
         assert_eq!(cfg.agent.hidden, 16);
         assert_eq!((cfg.image_size, cfg.agent.input_size), (76, 64));
         assert_eq!(cfg.batch_size, base.batch_size);
+        let cfg = config(&["--view", "angle30", "--corrupt", "gripper_only,random_reflection"]).unwrap();
+        assert_eq!((cfg.view.as_str(), cfg.corruption.as_str()), ("angle30", "gripper_only,random_reflection"));
     }
 
     #[test]
@@ -274,6 +294,10 @@ mod tests {
         assert!(e.contains("--lr-final") && e.contains("fast"), "{e}");
         assert_eq!(config(&["--lr-final", "none"]).unwrap().agent.lr_final, None);
         assert_eq!(config(&["--lr-final", "1e-4"]).unwrap().agent.lr_final, Some(1e-4));
+        let e = config(&["--corrupt", "mirror"]).unwrap_err().to_string();
+        assert!(e.contains("corruption") && e.contains("`mirror`"), "{e}");
+        let e = config(&["--view", "top"]).unwrap_err().to_string();
+        assert!(e.contains("view") && e.contains("`top`"), "{e}");
         let e = config(&["--preset", "huge"]).unwrap_err().to_string();
         assert!(e.contains("huge"), "{e}");
     }

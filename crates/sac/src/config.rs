@@ -96,6 +96,10 @@ pub struct TrainConfig {
     pub task: String,
     /// Camera preset of `equiarm_sim::ViewPreset` (`side` is the paper's oblique view).
     pub view: String,
+    /// Symmetry corruptions of the observations (docs/paper.md §5): `none` or a comma-separated list
+    /// of `equiarm_sim::env::Corruption` names (random_reflection, occlusion_projection,
+    /// gripper_only); checked by `equiarm_train::config::check`.
+    pub corruption: String,
     /// Rendered frame size in pixels (paper 152); the networks see `agent.input_size` crops.
     pub image_size: usize,
     /// SAC and network settings.
@@ -153,6 +157,7 @@ impl TrainConfig {
         TrainConfig {
             task: task.to_string(),
             view: "side".into(),
+            corruption: "none".into(),
             image_size: 152,
             agent: AgentConfig::default(),
             replay: ReplayConfig::default(),

@@ -38,6 +38,51 @@ pub struct Corruption {
     pub gripper_only: bool,
 }
 
+impl Corruption {
+    /// The flags' names, in the order [`Corruption::name`] writes them.
+    pub const NAMES: [&'static str; 3] = ["random_reflection", "occlusion_projection", "gripper_only"];
+
+    /// Parses `none` or a comma-separated list of [`Corruption::NAMES`] (the config's and the command
+    /// line's spelling); an unknown or repeated name is an error naming it.
+    pub fn parse(text: &str) -> crate::Result<Self> {
+        let mut c = Corruption::default();
+        let text = text.trim();
+        if text == "none" || text.is_empty() {
+            return Ok(c);
+        }
+        for name in text.split(',').map(str::trim) {
+            let flag = match name {
+                "random_reflection" => &mut c.random_reflection,
+                "occlusion_projection" => &mut c.occlusion_projection,
+                "gripper_only" => &mut c.gripper_only,
+                _ => {
+                    return Err(crate::SimError::Config {
+                        field: "corruption",
+                        message: format!(
+                            "unknown corruption `{name}`: use none or a comma-separated list of {}",
+                            Self::NAMES.join(", ")
+                        ),
+                    });
+                }
+            };
+            if std::mem::replace(flag, true) {
+                return Err(crate::SimError::Config {
+                    field: "corruption",
+                    message: format!("`{name}` is named twice"),
+                });
+            }
+        }
+        Ok(c)
+    }
+
+    /// `none`, or the set flags comma-separated in the order of [`Corruption::NAMES`].
+    pub fn name(&self) -> String {
+        let set = [self.random_reflection, self.occlusion_projection, self.gripper_only];
+        let names: Vec<&str> = Self::NAMES.iter().zip(set).filter(|(_, on)| *on).map(|(n, _)| *n).collect();
+        if names.is_empty() { "none".into() } else { names.join(",") }
+    }
+}
+
 /// Largest episode step limit accepted (the paper's is 50).
 pub const MAX_EPISODE_STEPS: u32 = 10_000;
 

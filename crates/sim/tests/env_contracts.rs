@@ -314,3 +314,22 @@ fn descending_onto_a_block_stops_on_top_and_leaves_it_in_place() {
         assert!((0.047..0.055).contains(&bottoms), "seed {seed}: finger bottoms at z {bottoms}");
     }
 }
+
+#[test]
+fn corruption_names_round_trip_and_bad_names_are_refused_naming_them() {
+    for text in [
+        "none",
+        "random_reflection",
+        "gripper_only,random_reflection",
+        "random_reflection,occlusion_projection,gripper_only",
+    ] {
+        let c = Corruption::parse(text).unwrap();
+        assert_eq!(Corruption::parse(&c.name()).unwrap(), c, "{text}");
+    }
+    assert_eq!(Corruption::parse("gripper_only, random_reflection").unwrap().name(), "random_reflection,gripper_only");
+    assert_eq!(Corruption::parse("none").unwrap(), Corruption::default());
+    let e = Corruption::parse("random_reflect").unwrap_err().to_string();
+    assert!(e.contains("`random_reflect`") && e.contains("corruption"), "{e}");
+    let e = Corruption::parse("gripper_only,gripper_only").unwrap_err().to_string();
+    assert!(e.contains("twice"), "{e}");
+}

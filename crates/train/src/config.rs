@@ -3,6 +3,7 @@
 //! everything that runs a config (the in-process loop, the nodes, the command line) calls it.
 
 use equiarm_sac::config::{ConfigError, TrainConfig};
+use equiarm_sim::env::Corruption;
 use equiarm_sim::{TaskKind, ViewPreset};
 
 /// Largest episode step limit accepted (the paper: 50): the simulator's.
@@ -17,6 +18,13 @@ pub fn check(cfg: &TrainConfig) -> Result<(), ConfigError> {
     }
     if ViewPreset::from_name(&cfg.view).is_none() {
         return err("view", format!("unknown camera preset `{}` (e.g. side, angle15 … angle90)", cfg.view));
+    }
+    if let Err(e) = Corruption::parse(&cfg.corruption) {
+        let message = match e {
+            equiarm_sim::SimError::Config { message, .. } => message,
+            other => other.to_string(),
+        };
+        return err("corruption", message);
     }
     if cfg.max_episode_steps > MAX_EPISODE_STEPS {
         return err(
@@ -48,6 +56,10 @@ mod tests {
         assert!(e.message.contains("block_pulling") && e.message.contains("block_in_bowl"), "{e}");
         let c = TrainConfig { view: "sideways".into(), ..TrainConfig::reduced("block_pulling") };
         assert_eq!(check(&c).unwrap_err().field, "view");
+        let c = TrainConfig { corruption: "random_reflection,mirror".into(), ..TrainConfig::reduced("block_pulling") };
+        let e = check(&c).unwrap_err();
+        assert_eq!(e.field, "corruption");
+        assert!(e.message.contains("`mirror`"), "{}", e.message);
         let c = TrainConfig { max_episode_steps: u32::MAX, ..TrainConfig::reduced("block_pulling") };
         let e = check(&c).unwrap_err();
         assert_eq!(e.field, "max_episode_steps");

@@ -27,7 +27,7 @@ pub fn episode_seed(seed: u64, env: u32, episode: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-/// The env config of a run; the config's task and camera names are checked ([`check`]).
+/// The env config of a run; the config's task, camera and corruption names are checked ([`check`]).
 pub fn env_config(cfg: &TrainConfig) -> Result<EnvConfig, TrainError> {
     check(cfg)?;
     let task = TaskKind::from_name(&cfg.task).expect("checked");
@@ -36,6 +36,7 @@ pub fn env_config(cfg: &TrainConfig) -> Result<EnvConfig, TrainError> {
     e.camera.width = cfg.image_size;
     e.camera.height = cfg.image_size;
     e.max_steps = cfg.max_episode_steps;
+    e.corruption = equiarm_sim::env::Corruption::parse(&cfg.corruption).expect("checked");
     Ok(e)
 }
 

@@ -70,9 +70,34 @@ impl EvalResult {
     }
 }
 
-/// Evaluate the learner's greedy policy on `episodes` fixed-seed episodes, `n` envs at a time.
+/// Evaluate the learner's greedy policy on `episodes` fixed-seed episodes, `n` envs at a time: the
+/// evaluations during training ([`Stream::Training`]).
 pub fn evaluate(learner: &mut Learner, envs: &mut [Env], episodes: usize) -> Result<EvalResult, TrainError> {
+    evaluate_on(learner, envs, episodes, Stream::Training)
+}
+
+/// Which fixed episode seeds an evaluation uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stream {
+    /// The episodes every evaluation during training sees (the learning curve).
+    Training,
+    /// Episodes no evaluation during training saw: the final held-out figure of a run, so that no
+    /// choice made by watching the learning curve can favour it.
+    HeldOut,
+}
+
+/// [`evaluate`] on the episode seeds of `stream`.
+pub fn evaluate_on(
+    learner: &mut Learner,
+    envs: &mut [Env],
+    episodes: usize,
+    stream: Stream,
+) -> Result<EvalResult, TrainError> {
     let cfg = learner.config().clone();
+    let stream_index = match stream {
+        Stream::Training => 0,
+        Stream::HeldOut => 1,
+    };
     let gamma = cfg.agent.gamma;
     let mut ended = Vec::with_capacity(episodes);
     let mut next = 0usize;
@@ -80,7 +105,7 @@ pub fn evaluate(learner: &mut Learner, envs: &mut [Env], episodes: usize) -> Res
         let n = envs.len().min(episodes - next);
         let mut obs: Vec<Option<Arc<StoredFrame>>> = Vec::with_capacity(n);
         for (i, env) in envs.iter_mut().take(n).enumerate() {
-            let o = env.reset(episode_seed(cfg.seed ^ EVAL, 0, (next + i) as u64))?;
+            let o = env.reset(episode_seed(cfg.seed ^ EVAL, stream_index, (next + i) as u64))?;
             obs.push(Some(frame_of(&o)?));
         }
         let mut steps = vec![0u32; n];

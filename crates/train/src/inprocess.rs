@@ -75,6 +75,10 @@ pub struct RunOptions {
     /// A new run in a directory that holds a run moves that run aside (`RUN_DIR.old-N`) instead
     /// of being refused ([`crate::rundir::RunDirLock::acquire_new`]).
     pub force: bool,
+    /// Also write a checkpoint whenever this many seconds of training passed since the last one
+    /// (besides the config's `checkpoint_every` updates), so that a slow run loses little when it
+    /// is killed. `None`: by update count only.
+    pub checkpoint_secs: Option<f64>,
 }
 
 impl Default for RunOptions {
@@ -87,6 +91,7 @@ impl Default for RunOptions {
             progress: false,
             device: equiarm_nn::device::cpu(),
             force: false,
+            checkpoint_secs: None,
         }
     }
 }
@@ -157,6 +162,7 @@ pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Resu
         wall_time,
     };
     let sps_start = (Instant::now(), global_step);
+    let mut last_checkpoint = Instant::now();
     while learner.updates() < total && !stop() {
         // Act in every env, step, store.
         let frames: Vec<&StoredFrame> = slots.iter().map(|s| &*s.obs).collect();
@@ -201,8 +207,11 @@ pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Resu
             let e = evaluate(&mut learner, &mut eval_envs, cfg.eval_episodes)?;
             record.evaluation(global_step, wall(&started), e)?;
         }
-        if cfg.checkpoint_every > 0 && u % cfg.checkpoint_every == 0 {
+        let by_count = cfg.checkpoint_every > 0 && u % cfg.checkpoint_every == 0;
+        let by_time = opts.checkpoint_secs.is_some_and(|s| last_checkpoint.elapsed().as_secs_f64() >= s);
+        if (by_count || by_time) && u < total {
             record.checkpoint(&learner, STATE_FILE, &state(&slots, global_step, &record, wall(&started)))?;
+            last_checkpoint = Instant::now();
         }
         if let Some(p) = progress.as_mut() {
             let mut fields = vec![("SPS", format!("{sps:.1}")), ("alpha", format!("{:.3}", m.alpha))];

@@ -1,0 +1,44 @@
+//! The experiment runner's errors: each names the file or run directory it is about.
+
+use std::path::PathBuf;
+
+/// What can go wrong.
+#[derive(Debug, thiserror::Error)]
+pub enum ExperimentError {
+    /// The grid file does not read, or a value in it is out of its domain.
+    #[error("grid {path}: {message}")]
+    Grid {
+        /// The grid file.
+        path: PathBuf,
+        /// What is wrong, naming the key.
+        message: String,
+    },
+    /// A run directory holds something the grid does not explain (another config, a bad result).
+    #[error("run {dir}: {message}")]
+    Run {
+        /// The run directory.
+        dir: PathBuf,
+        /// What is wrong and the way out.
+        message: String,
+    },
+    /// Reading or writing a file failed.
+    #[error("{path}: {message}")]
+    Io {
+        /// The file or directory.
+        path: PathBuf,
+        /// The cause.
+        message: String,
+    },
+    /// Training or evaluating a run failed.
+    #[error(transparent)]
+    Train(#[from] equiarm_train::TrainError),
+}
+
+/// The runner's results.
+pub type Result<T, E = ExperimentError> = std::result::Result<T, E>;
+
+/// An [`ExperimentError::Io`] maker for `path`.
+pub fn io(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> ExperimentError {
+    let path = path.into();
+    move |e| ExperimentError::Io { path, message: e.to_string() }
+}

@@ -1,0 +1,355 @@
+//! A named grid of runs: the TOML file `experiments/NAME.toml`, its cells (task × variant × view ×
+//! corruption × seed) and the training config of each cell.
+//!
+//! ```toml
+//! description = "Equi SAC against CNN SAC on the five tasks"
+//! preset = "reduced16"                  # the base config of every run (equiarm train --preset)
+//! tasks = ["block_pulling", "block_in_bowl"]
+//! variants = ["equi", "cnn"]            # see VARIANTS
+//! views = ["side"]                      # camera presets (default: side)
+//! corruptions = ["none"]                # `none` or comma-separated corruption names (default: none)
+//! seeds = [0, 1]
+//! heldout_episodes = 100                # the final held-out evaluation of each run
+//! checkpoint_minutes = 10               # a checkpoint at least this often (besides checkpoint_every)
+//!
+//! [updates]                             # total_updates per task (default: the preset's)
+//! block_in_bowl = 10000
+//!
+//! [config]                              # any TrainConfig field, as in a --config JSON file
+//! eval_every = 100
+//! agent = { lr_final = 3e-4 }
+//!
+//! [paper]                               # the paper's figure per task/variant, for the report
+//! "block_pulling/equi" = 0.87
+//! ```
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use equiarm_sac::agent::ModelKind;
+use equiarm_sac::config::{Augmentation, Preset, TrainConfig};
+use serde::Deserialize;
+
+use crate::error::{ExperimentError, Result};
+
+/// A model variant of the paper's comparisons: a network family with an augmentation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Variant {
+    /// Its name in grid files, run directories and reports.
+    pub name: &'static str,
+    /// Its label in tables and figures (the paper's).
+    pub label: &'static str,
+    /// The networks.
+    pub model: ModelKind,
+    /// The augmentation.
+    pub augmentation: Augmentation,
+}
+
+/// Every variant a grid may name (docs/paper.md §1.8–1.11).
+pub const VARIANTS: [Variant; 4] = [
+    Variant { name: "equi", label: "Equi SAC + RAD", model: ModelKind::Equi, augmentation: Augmentation::Rad },
+    Variant { name: "cnn", label: "CNN SAC + RAD", model: ModelKind::Cnn, augmentation: Augmentation::Rad },
+    Variant {
+        name: "cnn_drq",
+        label: "CNN SAC + DrQ",
+        model: ModelKind::Cnn,
+        augmentation: Augmentation::Drq { k: 2, m: 2 },
+    },
+    Variant { name: "sen", label: "SEN + RAD", model: ModelKind::Sen, augmentation: Augmentation::Rad },
+];
+
+impl Variant {
+    /// A variant by name.
+    pub fn by_name(name: &str) -> Option<Variant> {
+        VARIANTS.iter().copied().find(|v| v.name == name)
+    }
+}
+
+/// The grid file as written.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GridFile {
+    description: String,
+    #[serde(default = "default_preset")]
+    preset: String,
+    tasks: Vec<String>,
+    variants: Vec<String>,
+    #[serde(default = "default_views")]
+    views: Vec<String>,
+    #[serde(default = "default_corruptions")]
+    corruptions: Vec<String>,
+    seeds: Vec<u64>,
+    #[serde(default = "default_heldout")]
+    heldout_episodes: usize,
+    #[serde(default = "default_checkpoint_minutes")]
+    checkpoint_minutes: f64,
+    #[serde(default)]
+    updates: BTreeMap<String, u64>,
+    #[serde(default)]
+    config: toml::Table,
+    #[serde(default)]
+    paper: BTreeMap<String, f64>,
+}
+
+fn default_preset() -> String {
+    Preset::DEFAULT.name().into()
+}
+fn default_views() -> Vec<String> {
+    vec!["side".into()]
+}
+fn default_corruptions() -> Vec<String> {
+    vec!["none".into()]
+}
+fn default_heldout() -> usize {
+    100
+}
+fn default_checkpoint_minutes() -> f64 {
+    10.0
+}
+
+/// One run of a grid.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Cell {
+    /// Task name.
+    pub task: String,
+    /// Variant name ([`VARIANTS`]).
+    pub variant: String,
+    /// Camera preset.
+    pub view: String,
+    /// Corruption setting (`none` or comma-separated names, in their canonical order).
+    pub corruption: String,
+    /// Seed.
+    pub seed: u64,
+}
+
+impl Cell {
+    /// The run directory below the experiment's: `TASK/VARIANT/VIEW/CORRUPTION/sSEED` (commas of
+    /// the corruption written as `+`).
+    pub fn rel_dir(&self) -> PathBuf {
+        [&self.task, &self.variant, &self.view, &self.corruption.replace(',', "+"), &format!("s{}", self.seed)]
+            .iter()
+            .collect()
+    }
+
+    /// The group a report draws as one curve of one figure: everything but the seed.
+    pub fn group(&self) -> (String, String, String, String) {
+        (self.task.clone(), self.view.clone(), self.corruption.clone(), self.variant.clone())
+    }
+}
+
+/// A checked grid.
+#[derive(Clone, Debug)]
+pub struct Grid {
+    /// The file it was read from.
+    pub path: PathBuf,
+    /// Its name (the file stem).
+    pub name: String,
+    /// What it is for (one line, shown in the report).
+    pub description: String,
+    /// Base preset.
+    pub preset: Preset,
+    /// Held-out episodes per run.
+    pub heldout_episodes: usize,
+    /// Checkpoint interval in minutes of training.
+    pub checkpoint_minutes: f64,
+    /// The paper's figure per `task/variant` (discounted return), for the report.
+    pub paper: BTreeMap<String, f64>,
+    cells: Vec<Cell>,
+    updates: BTreeMap<String, u64>,
+    overrides: serde_json::Value,
+}
+
+impl Grid {
+    /// Reads and checks `path`: every name is known, every cell's config passes
+    /// `equiarm_train::config::check`. Errors name the file and the key.
+    pub fn read(path: &Path) -> Result<Grid> {
+        let text = std::fs::read_to_string(path).map_err(crate::error::io(path))?;
+        Grid::parse(path, &text)
+    }
+
+    /// [`Grid::read`] of the text of `path`.
+    pub fn parse(path: &Path, text: &str) -> Result<Grid> {
+        let bad = |message: String| ExperimentError::Grid { path: path.to_path_buf(), message };
+        let f: GridFile = toml::from_str(text).map_err(|e| bad(e.to_string().trim_end().to_string()))?;
+        let preset = Preset::from_name(&f.preset).ok_or_else(|| {
+            let names: Vec<&str> = Preset::ALL.iter().map(|p| p.name()).collect();
+            bad(format!("preset: unknown preset `{}`: use {}", f.preset, names.join(", ")))
+        })?;
+        for (key, list) in [
+            ("tasks", f.tasks.len()),
+            ("variants", f.variants.len()),
+            ("views", f.views.len()),
+            ("corruptions", f.corruptions.len()),
+            ("seeds", f.seeds.len()),
+        ] {
+            if list == 0 {
+                return Err(bad(format!("{key}: the list is empty")));
+            }
+        }
+        for v in &f.variants {
+            if Variant::by_name(v).is_none() {
+                let names: Vec<&str> = VARIANTS.iter().map(|v| v.name).collect();
+                return Err(bad(format!("variants: unknown variant `{v}`: use {}", names.join(", "))));
+            }
+        }
+        let mut corruptions = Vec::new();
+        for c in &f.corruptions {
+            let parsed = equiarm_sim::Corruption::parse(c).map_err(|e| bad(format!("corruptions: {e}")))?;
+            corruptions.push(parsed.name());
+        }
+        for task in f.updates.keys() {
+            if !f.tasks.contains(task) {
+                return Err(bad(format!("updates: `{task}` is not one of this grid's tasks")));
+            }
+        }
+        if f.heldout_episodes > equiarm_sac::config::MAX_EPISODES {
+            return Err(bad(format!(
+                "heldout_episodes: {} is above {}",
+                f.heldout_episodes,
+                equiarm_sac::config::MAX_EPISODES
+            )));
+        }
+        if !(f.checkpoint_minutes.is_finite() && f.checkpoint_minutes > 0.0) {
+            return Err(bad(format!("checkpoint_minutes: {} must be a positive number", f.checkpoint_minutes)));
+        }
+        let overrides = serde_json::to_value(&f.config).map_err(|e| bad(format!("config: {e}")))?;
+        let mut cells = Vec::new();
+        for task in &f.tasks {
+            for variant in &f.variants {
+                for view in &f.views {
+                    for corruption in &corruptions {
+                        for &seed in &f.seeds {
+                            cells.push(Cell {
+                                task: task.clone(),
+                                variant: variant.clone(),
+                                view: view.clone(),
+                                corruption: corruption.clone(),
+                                seed,
+                            });
+                        }
+                    }
+                }
+            }
+        }
+        let mut seen = std::collections::HashSet::new();
+        if let Some(c) = cells.iter().find(|c| !seen.insert((*c).clone())) {
+            return Err(bad(format!("the run {} appears twice (a repeated name in a list)", c.rel_dir().display())));
+        }
+        let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let grid = Grid {
+            path: path.to_path_buf(),
+            name,
+            description: f.description,
+            preset,
+            heldout_episodes: f.heldout_episodes,
+            checkpoint_minutes: f.checkpoint_minutes,
+            paper: f.paper,
+            cells,
+            updates: f.updates,
+            overrides,
+        };
+        for c in &grid.cells {
+            grid.config(c)?;
+        }
+        Ok(grid)
+    }
+
+    /// Every cell, in file order (task, variant, view, corruption, seed).
+    pub fn cells(&self) -> &[Cell] {
+        &self.cells
+    }
+
+    /// The training config of `cell`: the preset for its task, the `[config]` overrides, then the
+    /// cell's variant, view, corruption, seed and the task's `[updates]`; checked.
+    pub fn config(&self, cell: &Cell) -> Result<TrainConfig> {
+        let bad = |message: String| ExperimentError::Grid { path: self.path.clone(), message };
+        let base = TrainConfig::preset(self.preset, &cell.task);
+        let mut value = serde_json::to_value(&base).map_err(|e| bad(e.to_string()))?;
+        merge(&mut value, &self.overrides);
+        let mut cfg: TrainConfig = serde_json::from_value(value).map_err(|e| bad(format!("config: {e}")))?;
+        let variant =
+            Variant::by_name(&cell.variant).ok_or_else(|| bad(format!("unknown variant `{}`", cell.variant)))?;
+        cfg.task = cell.task.clone();
+        cfg.agent.model = variant.model;
+        cfg.augmentation = variant.augmentation;
+        cfg.view = cell.view.clone();
+        cfg.corruption = cell.corruption.clone();
+        cfg.seed = cell.seed;
+        if let Some(&u) = self.updates.get(&cell.task) {
+            cfg.total_updates = u;
+        }
+        equiarm_train::config::check(&cfg)
+            .map_err(|e| bad(format!("run {}: config field `{}`: {}", cell.rel_dir().display(), e.field, e.message)))?;
+        Ok(cfg)
+    }
+}
+
+/// Writes `patch` into `base`: objects key by key (recursively), anything else replaced.
+fn merge(base: &mut serde_json::Value, patch: &serde_json::Value) {
+    match (base, patch) {
+        (serde_json::Value::Object(b), serde_json::Value::Object(p)) => {
+            for (k, v) in p {
+                match b.get_mut(k) {
+                    Some(slot) => merge(slot, v),
+                    None => {
+                        b.insert(k.clone(), v.clone());
+                    }
+                }
+            }
+        }
+        (b, p) => *b = p.clone(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Grid> {
+        Grid::parse(Path::new("experiments/t.toml"), text)
+    }
+
+    const BASE: &str = "description = \"t\"\ntasks = [\"block_pulling\", \"block_in_bowl\"]\nvariants = [\"equi\", \"cnn_drq\"]\nseeds = [0, 1]\n";
+
+    #[test]
+    fn cells_and_configs_follow_the_file() {
+        let g = parse(&format!(
+            "{BASE}corruptions = [\"gripper_only,random_reflection\"]\n[updates]\nblock_in_bowl = 10000\n[config]\neval_every = 50\nagent = {{ hidden = 8 }}\n"
+        ))
+        .unwrap();
+        assert_eq!(g.cells().len(), 8);
+        let c = &g.cells()[2];
+        assert_eq!((c.task.as_str(), c.variant.as_str(), c.seed), ("block_pulling", "cnn_drq", 0));
+        assert_eq!(c.corruption, "random_reflection,gripper_only");
+        assert_eq!(c.rel_dir(), PathBuf::from("block_pulling/cnn_drq/side/random_reflection+gripper_only/s0"));
+        let cfg = g.config(c).unwrap();
+        assert_eq!((cfg.eval_every, cfg.agent.hidden, cfg.seed), (50, 8, 0));
+        assert_eq!(cfg.augmentation, Augmentation::Drq { k: 2, m: 2 });
+        assert_eq!(cfg.agent.model, ModelKind::Cnn);
+        assert_eq!(cfg.total_updates, TrainConfig::reduced16("block_pulling").total_updates);
+        assert_eq!(g.config(&g.cells()[4]).unwrap().total_updates, 10_000);
+        // the rest is the preset's
+        assert_eq!(cfg.batch_size, TrainConfig::reduced16("block_pulling").batch_size);
+    }
+
+    #[test]
+    fn bad_grids_are_refused_naming_the_key() {
+        for (text, key) in [
+            (format!("{BASE}preset = \"huge\""), "preset"),
+            (BASE.replace("\"cnn_drq\"", "\"ferm2\""), "variants"),
+            (format!("{BASE}views = [\"top\"]"), "view"),
+            (format!("{BASE}corruptions = [\"mirror\"]"), "corruptions"),
+            (format!("{BASE}[updates]\nblock_picking = 10"), "updates"),
+            (format!("{BASE}[config]\nbatch_sise = 10"), "batch_sise"),
+            (format!("{BASE}[config]\nbatch_size = 0"), "batch_size"),
+            (format!("{BASE}checkpoint_minutes = 0"), "checkpoint_minutes"),
+            (format!("{BASE}colour = 1"), "colour"),
+            (BASE.replace("seeds = [0, 1]", "seeds = []"), "seeds"),
+            (BASE.replace("seeds = [0, 1]", "seeds = [1, 1]"), "twice"),
+            (BASE.replace("description", "desc"), "description"),
+        ] {
+            let e = parse(&text).unwrap_err().to_string();
+            assert!(e.contains("experiments/t.toml") && e.contains(key), "{key}: {e}");
+        }
+    }
+}

@@ -1,0 +1,345 @@
+//! The report of a grid, from its run directories alone: `OUT/README.md` with one table row per
+//! task × view × corruption × variant (mean ± standard error over the seeds of the last evaluation
+//! during training and of the held-out evaluation, success rate beside discounted return, the
+//! paper's figure where the grid gives it) and, per task × view × corruption, two figures of the
+//! greedy evaluations against updates (success rate, discounted return), one curve per variant:
+//! the mean over seeds with a band of ± one standard error.
+//!
+//! The report also writes `OUT/runs.json`, the archive of its finished runs (config, evaluations,
+//! result: a few kB a run). Committed with the report, it lets a later checkout, on a machine without
+//! the run directories, count those runs as done (`run` skips them) and draw them again.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use equiarm_sac::config::TrainConfig;
+use equiarm_train::evaluation::EvalResult;
+use equiarm_train::plot::{Chart, Series, palette, write_png};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{ExperimentError, Result, io};
+use crate::grid::{Cell, Grid, VARIANTS, Variant};
+use crate::runner::{RESULT_FILE, RunResult, RunState, run_state};
+
+/// Mean and standard error (s.d. / √n; 0 for one value; NaN for none).
+pub fn mean_se(v: &[f64]) -> (f64, f64) {
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    if v.len() < 2 {
+        return (m, 0.0);
+    }
+    let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
+    (m, (var / n).sqrt())
+}
+
+/// One run as the report sees it.
+#[derive(Clone, Debug)]
+pub struct RunView {
+    /// The cell.
+    pub cell: Cell,
+    /// Evaluations so far (`evals.json`, or the latest checkpoint's for a run in progress).
+    pub evals: Vec<EvalResult>,
+    /// The result, once finished.
+    pub result: Option<RunResult>,
+    /// Updates the run is to make.
+    pub total_updates: u64,
+}
+
+/// A finished run as a report keeps it (`OUT/runs.json`): enough to count it as done and to draw
+/// it again on a machine that does not have its directory.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Archived {
+    /// The run's directory below the runs directory ([`Cell::rel_dir`]).
+    pub run: PathBuf,
+    /// Its config.
+    pub config: TrainConfig,
+    /// Its evaluations during training.
+    pub evals: Vec<EvalResult>,
+    /// Its result.
+    pub result: RunResult,
+}
+
+/// The archive file a report writes beside its README.md.
+pub const ARCHIVE_FILE: &str = "runs.json";
+
+/// Finished runs archived by earlier reports: every `DIR/*/runs.json`, by run directory (a missing
+/// `DIR` is an empty archive).
+pub fn read_archives(dir: &Path) -> Result<BTreeMap<PathBuf, Archived>> {
+    let mut out = BTreeMap::new();
+    if !dir.is_dir() {
+        return Ok(out);
+    }
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(io(dir))?
+        .filter_map(|e| e.ok().map(|e| e.path().join(ARCHIVE_FILE)))
+        .filter(|p| p.is_file())
+        .collect();
+    files.sort();
+    for f in files {
+        let text = std::fs::read(&f).map_err(io(&f))?;
+        let runs: Vec<Archived> = serde_json::from_slice(&text)
+            .map_err(|e| ExperimentError::Io { path: f.clone(), message: format!("not a run archive: {e}") })?;
+        for a in runs {
+            out.insert(a.run.clone(), a);
+        }
+    }
+    Ok(out)
+}
+
+/// The archived run of `cell`, if the archive has it with the config the grid gives now.
+pub fn archived<'a>(archive: &'a BTreeMap<PathBuf, Archived>, cell: &Cell, cfg: &TrainConfig) -> Option<&'a Archived> {
+    archive.get(&cell.rel_dir()).filter(|a| &a.config == cfg)
+}
+
+/// Every cell of `grid` with a directory below `runs` or a finished run in `archive`.
+pub fn collect(grid: &Grid, runs: &Path, archive: &BTreeMap<PathBuf, Archived>) -> Result<Vec<RunView>> {
+    let mut out = Vec::new();
+    for cell in grid.cells() {
+        let dir = runs.join(cell.rel_dir());
+        let cfg = grid.config(cell)?;
+        let local_done = dir.join(RESULT_FILE).is_file();
+        if let (false, Some(a)) = (local_done, archived(archive, cell, &cfg)) {
+            out.push(RunView {
+                cell: cell.clone(),
+                evals: a.evals.clone(),
+                result: Some(a.result.clone()),
+                total_updates: cfg.total_updates,
+            });
+            continue;
+        }
+        if !dir.is_dir() {
+            continue;
+        }
+        let result = match run_state(&dir, &cfg)? {
+            RunState::Done(r) => Some(*r),
+            _ => None,
+        };
+        // A finished run's evals.json; a run in progress has its evaluations up to its latest
+        // checkpoint in that checkpoint's loop state.
+        let bad = |e: String| ExperimentError::Run { dir: dir.clone(), message: e };
+        let evals_file = dir.join("evals.json");
+        let latest = dir.join("checkpoints").join("latest");
+        let evals: Vec<EvalResult> = if result.is_none() && latest.is_file() {
+            let state = equiarm_train::rundir::find_checkpoint(&dir)?.join(equiarm_train::inprocess::STATE_FILE);
+            let v: serde_json::Value = equiarm_sac::learner::read_json(&state).map_err(|e| bad(e.to_string()))?;
+            serde_json::from_value(v.get("evals").cloned().unwrap_or_default())
+                .map_err(|e| bad(format!("{}: {e}", state.display())))?
+        } else if evals_file.is_file() {
+            equiarm_sac::learner::read_json(&evals_file).map_err(|e| bad(format!("evals.json: {e}")))?
+        } else {
+            Vec::new()
+        };
+        out.push(RunView { cell: cell.clone(), evals, result, total_updates: cfg.total_updates });
+    }
+    Ok(out)
+}
+
+type GroupKey = (String, String, String);
+
+/// Writes `OUT/README.md`, the figures and the archive of the finished runs (`OUT/runs.json`);
+/// returns the files written. Runs are taken from `runs`, and from `archive` where `runs` does not
+/// have them finished.
+pub fn write(
+    grid: &Grid,
+    runs: &Path,
+    archive: &BTreeMap<PathBuf, Archived>,
+    out: &Path,
+    command: &str,
+) -> Result<Vec<PathBuf>> {
+    let views = collect(grid, runs, archive)?;
+    std::fs::create_dir_all(out).map_err(io(out))?;
+    let mut files = Vec::new();
+    let mut keep = Vec::new();
+    for v in &views {
+        if let Some(r) = &v.result {
+            keep.push(Archived {
+                run: v.cell.rel_dir(),
+                config: grid.config(&v.cell)?,
+                evals: v.evals.clone(),
+                result: r.clone(),
+            });
+        }
+    }
+    let archive_file = out.join(ARCHIVE_FILE);
+    let json = serde_json::to_vec_pretty(&keep)
+        .map_err(|e| ExperimentError::Io { path: archive_file.clone(), message: e.to_string() })?;
+    std::fs::write(&archive_file, json).map_err(io(&archive_file))?;
+    // task × view × corruption → variant → runs
+    let mut groups: BTreeMap<GroupKey, BTreeMap<usize, Vec<&RunView>>> = BTreeMap::new();
+    for v in &views {
+        let vi = VARIANTS.iter().position(|x| x.name == v.cell.variant).unwrap_or(usize::MAX);
+        groups
+            .entry((v.cell.task.clone(), v.cell.view.clone(), v.cell.corruption.clone()))
+            .or_default()
+            .entry(vi)
+            .or_default()
+            .push(v);
+    }
+    let mut md = format!("# Experiment `{}`\n\n{}\n\n", grid.name, grid.description.trim());
+    md += &format!(
+        "Regenerate this page from the run directories with `{command}`. Grid: [`{}`]({}). Base preset `{}`; \
+         every run is one `equiarm train --in-process` run at one thread. Success rate and discounted return \
+         (γ = 0.99) of the greedy policy, mean ± standard error over the finished seeds: at the last \
+         evaluation during training (its episodes are the same at every evaluation) and over {} held-out \
+         episodes of the final weights (episodes no evaluation saw). The paper's figure is its discounted \
+         return at the last training step (docs/paper.md §6, read off its plots).\n\n",
+        grid.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+        relative_link(out, &grid.path),
+        grid.preset.name(),
+        grid.heldout_episodes
+    );
+    md += "| task | view | corruption | variant | finished | updates | last evaluation: success | disc. return | held-out: success | disc. return | held-out success per seed | paper (disc. return) | training time per run |\n";
+    md += "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    for ((task, view, corruption), by_variant) in &groups {
+        for (vi, runs_of) in by_variant {
+            let variant: Option<Variant> = VARIANTS.get(*vi).copied();
+            let done: Vec<&RunResult> = runs_of.iter().filter_map(|r| r.result.as_ref()).collect();
+            let pick =
+                |f: &dyn Fn(&RunResult) -> Option<f64>| -> Vec<f64> { done.iter().filter_map(|r| f(r)).collect() };
+            let cell = |v: Vec<f64>| {
+                let (m, se) = mean_se(&v);
+                if v.is_empty() { "–".to_string() } else { format!("{m:.2} ± {se:.2}") }
+            };
+            let mut per_seed: Vec<(u64, f64)> = runs_of
+                .iter()
+                .filter_map(|r| r.result.as_ref().map(|x| (r.cell.seed, x.heldout.success_rate)))
+                .collect();
+            per_seed.sort_by_key(|p| p.0);
+            let per_seed = per_seed.iter().map(|(s, x)| format!("s{s} {x:.2}")).collect::<Vec<_>>().join(", ");
+            let updates = runs_of.iter().map(|r| r.total_updates).max().unwrap_or(0);
+            let name = variant.map_or("?", |v| v.name);
+            let paper = grid.paper.get(&format!("{task}/{name}")).map_or("–".to_string(), |p| format!("{p:.2}"));
+            let time = cell(pick(&|r| Some(r.train_seconds / 60.0))) + " min";
+            md += &format!(
+                "| {task} | {view} | {corruption} | {} | {} of {} | {updates} | {} | {} | {} | {} | {} | {paper} | {} |\n",
+                variant.map_or("?", |v| v.label),
+                done.len(),
+                runs_of.len(),
+                cell(pick(&|r| r.last_eval.as_ref().map(|e| e.success_rate))),
+                cell(pick(&|r| r.last_eval.as_ref().map(|e| e.discounted_return))),
+                cell(pick(&|r| Some(r.heldout.success_rate))),
+                cell(pick(&|r| Some(r.heldout.discounted_return))),
+                if per_seed.is_empty() { "–".into() } else { per_seed },
+                if done.is_empty() { "–".into() } else { time },
+            );
+        }
+    }
+    let unfinished: Vec<String> = views
+        .iter()
+        .filter(|v| v.result.is_none())
+        .map(|v| {
+            let at = v.evals.last().map_or(0, |e| e.updates);
+            format!("- `{}` (last evaluation at {at} of {} updates)", v.cell.rel_dir().display(), v.total_updates)
+        })
+        .collect();
+    let missing = grid.cells().len() - views.len();
+    if !unfinished.is_empty() || missing > 0 {
+        md += "\nNot finished:\n\n";
+        md += &unfinished.join("\n");
+        if missing > 0 {
+            md += &format!("{}- {missing} runs not started", if unfinished.is_empty() { "" } else { "\n" });
+        }
+        md += "\n";
+    }
+    md += "\n## Learning curves\n\nGreedy evaluations during training, mean ± one standard error over seeds (a seed counts at an update count once it has evaluated there).\n\n";
+    for ((task, view, corruption), by_variant) in &groups {
+        let stem = format!("{task}-{view}-{}", corruption.replace(',', "+"));
+        for (metric, label) in [("success", "success rate"), ("return", "discounted return")] {
+            let series: Vec<Series> = by_variant
+                .iter()
+                .map(|(vi, runs_of)| {
+                    let label =
+                        VARIANTS.get(*vi).map_or("?".to_string(), |v| format!("{} ({} seeds)", v.label, runs_of.len()));
+                    let mut at: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
+                    for r in runs_of {
+                        for e in &r.evals {
+                            let y = if metric == "success" { e.success_rate } else { e.discounted_return };
+                            at.entry(e.updates).or_default().push(y);
+                        }
+                    }
+                    let stats: Vec<(f64, (f64, f64))> = at.iter().map(|(u, v)| (*u as f64, mean_se(v))).collect();
+                    Series {
+                        label,
+                        color: palette(*vi),
+                        points: stats.iter().map(|(x, (m, _))| (*x, *m)).collect(),
+                        band: Some(stats.iter().map(|(_, (_, se))| *se).collect()),
+                    }
+                })
+                .collect();
+            let mut chart = Chart::new(
+                format!("{task}, view {view}, corruption {corruption}"),
+                "updates",
+                format!("evaluation {label}"),
+            );
+            if metric == "success" {
+                chart.y_range = Some((0.0, 1.0));
+            }
+            let file = out.join(format!("{stem}-{metric}.png"));
+            write_png(&file, &chart, &series)
+                .map_err(|e| ExperimentError::Io { path: file.clone(), message: e.to_string() })?;
+            files.push(file);
+        }
+        md += &format!(
+            "![{task}, {view}, {corruption}]({stem}-success.png)\n![{task}, {view}, {corruption}: discounted return]({stem}-return.png)\n\n"
+        );
+    }
+    let readme = out.join("README.md");
+    std::fs::write(&readme, md).map_err(io(&readme))?;
+    files.insert(0, readme);
+    files.push(archive_file);
+    Ok(files)
+}
+
+/// A relative link from a file in `from_dir` to `to` (both relative to the working directory), or
+/// `to` as given when it cannot be made relative.
+fn relative_link(from_dir: &Path, to: &Path) -> String {
+    let abs = |p: &Path| std::path::absolute(p).ok();
+    let (Some(from), Some(to_abs)) = (abs(from_dir), abs(to)) else { return to.display().to_string() };
+    let f: Vec<_> = from.components().collect();
+    let t: Vec<_> = to_abs.components().collect();
+    let common = f.iter().zip(&t).take_while(|(a, b)| a == b).count();
+    let mut p = PathBuf::new();
+    for _ in common..f.len() {
+        p.push("..");
+    }
+    for c in &t[common..] {
+        p.push(c);
+    }
+    p.display().to_string()
+}
+
+/// Whether every run of `grid` is finished, below `runs` or in `archive`.
+pub fn all_finished(grid: &Grid, runs: &Path, archive: &BTreeMap<PathBuf, Archived>) -> Result<bool> {
+    for c in grid.cells() {
+        let cfg = grid.config(c)?;
+        if !runs.join(c.rel_dir()).join(RESULT_FILE).is_file() && archived(archive, c, &cfg).is_none() {
+            return Ok(false);
+        }
+    }
+    Ok(true)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mean_and_standard_error() {
+        assert_eq!(mean_se(&[0.5]), (0.5, 0.0));
+        let (m, se) = mean_se(&[0.8, 0.9, 1.0, 0.9]);
+        assert!((m - 0.9).abs() < 1e-12 && (se - (0.02f64 / 3.0 / 4.0).sqrt()).abs() < 1e-12, "{m} {se}");
+        assert!(mean_se(&[]).0.is_nan());
+    }
+
+    #[test]
+    fn links_are_relative_to_the_report() {
+        assert_eq!(
+            relative_link(Path::new("docs/results/tasks"), Path::new("experiments/tasks.toml")),
+            "../../../experiments/tasks.toml"
+        );
+    }
+}

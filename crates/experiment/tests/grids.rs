@@ -1,0 +1,34 @@
+//! The grids of `experiments/`: each reads and checks, and a run two grids have in common (same
+//! directory) has the same config in both, so that it is made once.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use equiarm_experiment::grid::Grid;
+
+#[test]
+fn every_grid_reads_and_shared_runs_agree() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../experiments");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 4, "{files:?}");
+    let mut seen: BTreeMap<PathBuf, (String, String)> = BTreeMap::new();
+    let mut shared = 0;
+    for f in &files {
+        let g = Grid::read(f).unwrap_or_else(|e| panic!("{e}"));
+        for c in g.cells() {
+            let cfg = serde_json::to_string(&g.config(c).unwrap()).unwrap();
+            if let Some((other, other_cfg)) = seen.get(&c.rel_dir()) {
+                assert_eq!(&cfg, other_cfg, "{} differs between {other} and {}", c.rel_dir().display(), g.name);
+                shared += 1;
+            } else {
+                seen.insert(c.rel_dir(), (g.name.clone(), cfg));
+            }
+        }
+    }
+    assert!(shared > 0, "the baselines and reflection grids share the tasks grid's runs");
+}
