@@ -87,3 +87,27 @@ fn k_updates_straight_equal_half_checkpoint_resume_half() {
         let _ = std::fs::remove_dir_all(d);
     }
 }
+
+/// `checkpoint_secs` writes a checkpoint whenever that much training time passed since the last
+/// one, besides `checkpoint_every` (0 here): with 0 s, after every update before the last; the last
+/// update's checkpoint is the one written at the end.
+#[test]
+fn checkpoints_by_training_time() {
+    let never = || false;
+    let dir = scratch("by_time");
+    let opts = RunOptions { run_dir: dir.clone(), stop_at: Some(4), checkpoint_secs: Some(0.0), ..Default::default() };
+    assert_eq!(run(tiny(), &opts, &never).unwrap().updates, 4);
+    let mut steps: Vec<String> = std::fs::read_dir(dir.join("checkpoints"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("step_"))
+        .collect();
+    steps.sort();
+    assert_eq!(steps, ["step_0000001", "step_0000002", "step_0000003", "step_0000004"]);
+    // without it, only the end's
+    let dir = scratch("by_count_only");
+    let opts = RunOptions { run_dir: dir.clone(), stop_at: Some(4), ..Default::default() };
+    run(tiny(), &opts, &never).unwrap();
+    let n = std::fs::read_dir(dir.join("checkpoints")).unwrap().filter(|e| e.as_ref().unwrap().path().is_dir()).count();
+    assert_eq!(n, 1);
+}
