@@ -49,7 +49,7 @@ ARGUMENTS = [
     ("seed", "0", "base seed S: env K uses 1000*S+K, the eval env 1000*S+999 (as train.sh)"),
     ("run_dir", "runs/launch", "run directory of the trainer; the bag goes to <run_dir>/bag"),
     ("total_updates", "", "gradient updates (empty: the preset's)"),
-    ("model", "", "equi, cnn or sen (empty: the config's)"),
+    ("model", "", "equi, cnn, sen or ferm (empty: the config's)"),
     ("config", "", "a training config JSON instead of the preset (sizes are read from it)"),
     ("deterministic", "false", "true: lock-step rounds (train.sh --deterministic)"),
     ("equiarm", "equiarm", "path of the equiarm binary"),

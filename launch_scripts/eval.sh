@@ -11,7 +11,7 @@
 #   --preset P         reduced16 (default), reduced or paper: the network's sizes (image FRAME:INPUT, hidden, model)
 #                      come from launch_scripts/configs/<preset>_<task>.json
 #   --config FILE      a training config JSON to read those sizes from instead (e.g. RUN/config.json)
-#   --model M          equi, cnn or sen (default: the config's)
+#   --model M          equi, cnn, sen or ferm (default: the config's)
 #   --out DIR          output directory; the bag is DIR/bag, logs in DIR/logs (default runs/eval-<task>-<time>)
 #   --timeout-s T      give up after T seconds (default 1800)
 # Environment: EQUIARM_BIN (the binary; when unset it is built once with cargo into CARGO_TARGET_DIR,

@@ -126,7 +126,7 @@ fn a_killed_grid_resumes_to_the_same_updates_and_reports() {
     let status = String::from_utf8_lossy(&at("status").output().unwrap().stdout).into_owned();
     assert_eq!(status.matches("finished (archived").count(), 2, "{status}");
     std::fs::remove_file(out.join("README.md")).unwrap();
-    assert!(at("report").arg("--out").arg(&out).status().unwrap().success());
+    assert!(at("report").arg("--out").arg(&out).output().unwrap().status.success());
     assert_eq!(std::fs::read_to_string(out.join("README.md")).unwrap(), md);
     equiarm().args(["experiment", "run", "tiny", "--file"]).arg(&grid).arg("--runs").arg(&runs).output().unwrap();
 

@@ -22,7 +22,7 @@ pub struct PolicyArgs {
     /// latest checkpoint). Directories give the architecture from their manifest.
     #[arg(long)]
     pub checkpoint: Option<PathBuf>,
-    /// Network family when there is no manifest: equi, cnn or sen (default: the default preset's).
+    /// Network family when there is no manifest: equi, cnn, sen or ferm (default: the default preset's).
     #[arg(long)]
     pub model: Option<String>,
     /// Hidden size when there is no manifest (default: the default preset's).
@@ -72,7 +72,8 @@ pub fn architecture(args: &PolicyArgs) -> anyhow::Result<(AgentConfig, usize, Op
     let mut agent = preset.agent.clone();
     let mut frame = preset.image_size;
     if let Some(m) = &args.model {
-        agent.model = ModelKind::parse(m).with_context(|| format!("unknown --model `{m}`: use equi, cnn or sen"))?;
+        agent.model =
+            ModelKind::parse(m).with_context(|| format!("unknown --model `{m}`: use equi, cnn, sen or ferm"))?;
     }
     agent.hidden = args.hidden.unwrap_or(agent.hidden);
     if let Some(img) = &args.image {

@@ -33,7 +33,7 @@ pub struct TrainArgs {
     /// Task (block_pulling, block_pushing, block_picking, drawer_opening, block_in_bowl).
     #[arg(long)]
     pub task: Option<String>,
-    /// Network family: equi, cnn or sen.
+    /// Network family: equi, cnn, sen or ferm (FERM also sets --augmentation to independent crops).
     #[arg(long)]
     pub model: Option<String>,
     /// Base seed.
@@ -168,8 +168,12 @@ impl TrainArgs {
             cfg.task = t.clone();
         }
         if let Some(m) = &self.model {
-            cfg.agent.model =
-                ModelKind::parse(m).ok_or_else(|| anyhow::anyhow!("unknown --model `{m}`: use equi, cnn or sen"))?;
+            cfg.agent.model = ModelKind::parse(m)
+                .ok_or_else(|| anyhow::anyhow!("unknown --model `{m}`: use equi, cnn, sen or ferm"))?;
+            if cfg.agent.model == ModelKind::Ferm && self.augmentation.is_none() {
+                // FERM crops obs and next_obs independently (docs/paper.md §1.10).
+                cfg.augmentation = Augmentation::Drq { k: 1, m: 1 };
+            }
         }
         macro_rules! set {
             ($($flag:ident => $($field:ident).+),* $(,)?) => { $( if let Some(v) = self.$flag { cfg.$($field).+ = v; } )* };

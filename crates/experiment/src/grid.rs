@@ -46,7 +46,7 @@ pub struct Variant {
 }
 
 /// Every variant a grid may name (docs/paper.md §1.8–1.11).
-pub const VARIANTS: [Variant; 4] = [
+pub const VARIANTS: [Variant; 5] = [
     Variant { name: "equi", label: "Equi SAC + RAD", model: ModelKind::Equi, augmentation: Augmentation::Rad },
     Variant { name: "cnn", label: "CNN SAC + RAD", model: ModelKind::Cnn, augmentation: Augmentation::Rad },
     Variant {
@@ -56,6 +56,7 @@ pub const VARIANTS: [Variant; 4] = [
         augmentation: Augmentation::Drq { k: 2, m: 2 },
     },
     Variant { name: "sen", label: "SEN + RAD", model: ModelKind::Sen, augmentation: Augmentation::Rad },
+    Variant { name: "ferm", label: "FERM", model: ModelKind::Ferm, augmentation: Augmentation::Drq { k: 1, m: 1 } },
 ];
 
 impl Variant {

@@ -4,6 +4,8 @@
 //! - [`EquiActor`], [`EquiCritic`]: Equivariant SAC, group D4 (§1.4, §1.5).
 //! - [`CnnActor`], [`CnnCritic`]: the CNN SAC baseline, 'conv' variant (§1.8).
 //! - [`SenActor`], [`SenCritic`]: SEN fc2, a CNN encoder with equivariant heads (§1.9).
+//! - [`FermActor`], [`FermCritic`], [`CurlBilinear`]: FERM, CURL's encoder, MLP heads and
+//!   contrastive loss (§1.10).
 //! - [`RotEquiNet`], [`RotCnnNet`]: the C8 rotation-estimation classifiers (§4).
 //!
 //! Input size: `8·2^p` pixels with `0 ≤ p ≤ 4` (128 in the paper). The paper's encoders pool
@@ -650,4 +652,232 @@ pub fn gaussian_sample(mean: Tensor<2>, log_std: Tensor<2>, eps: Tensor<2>) -> (
     let corr = (a.clone().powf_scalar(2.0).neg() + 1.0 + 1e-6).log();
     let log_pi = (log_n - corr).sum_dim(1);
     (a, log_pi, mean.tanh())
+}
+
+/// The FERM encoder's conv layers at 128 px as `(width, pad, pool after)` (`CURLSACEncoder3`,
+/// docs/paper.md §1.10): 3×3 padded convs `n/4, n/2, n, 2n` each followed by a 2×2 pool
+/// (128 → 8), then `4n` padded, without a pool (paper n = 64: 16 … 256, an 8×8 map).
+fn ferm_layers(n: usize) -> [(usize, usize, bool); 5] {
+    [(n / 4, 1, true), (n / 2, 1, true), (n, 1, true), (2 * n, 1, true), (4 * n, 1, false)]
+}
+
+/// The output size of the FERM encoder (its `z_dim`, the paper's 50).
+pub const FERM_Z_DIM: usize = 50;
+
+/// Width of the FERM actor's and critic's MLPs: `8n` (the paper's 512 at n = 64).
+pub fn ferm_mlp_width(hidden: usize) -> usize {
+    8 * hidden
+}
+
+/// The conv part of the FERM encoder (the part the actor shares with the critic).
+#[derive(Module, Debug)]
+pub struct FermConvs {
+    /// 3×3 convs with ReLU.
+    pub convs: Vec<Conv>,
+    pools: Vec<bool>,
+}
+
+impl FermConvs {
+    fn new(path: &str, cfg: &NetConfig, init: &Init, device: &Device) -> Result<(Self, usize), NetError> {
+        let layers = cfg.kept(ferm_layers(cfg.hidden))?;
+        let (convs, width) = plain_convs(&format!("{path}.convs."), cfg.in_channels, &layers, init, device);
+        Ok((FermConvs { convs, pools: pool_flags(&layers) }, width * 8 * 8))
+    }
+
+    /// `[B, C, S, S] → [B, 4n·8·8]` (flattened).
+    pub fn forward(&self, x: Tensor<4>) -> Tensor<2> {
+        let mut x = x;
+        for (conv, &pool) in self.convs.iter().zip(&self.pools) {
+            x = conv.forward_relu(x);
+            if pool {
+                x = max_pool2(x);
+            }
+        }
+        x.flatten(1, 3)
+    }
+}
+
+/// Layer normalisation over the last dimension, `ε = 1e-5`, with a learnt scale (1 at start) and
+/// shift (0), as PyTorch's `nn.LayerNorm`.
+#[derive(Module, Debug)]
+pub struct LayerNorm {
+    /// Scale.
+    pub gamma: burn::module::Param<Tensor<1>>,
+    /// Shift.
+    pub beta: burn::module::Param<Tensor<1>>,
+}
+
+impl LayerNorm {
+    /// Over `dim` features.
+    pub fn new(dim: usize, device: &Device) -> Self {
+        LayerNorm {
+            gamma: burn::module::Param::from_tensor(Tensor::ones([dim], device)),
+            beta: burn::module::Param::from_tensor(Tensor::zeros([dim], device)),
+        }
+    }
+
+    /// `[B, D] → [B, D]`.
+    pub fn forward(&self, x: Tensor<2>) -> Tensor<2> {
+        let mean = x.clone().mean_dim(1);
+        let centred = x - mean;
+        let var = centred.clone().powf_scalar(2.0).mean_dim(1);
+        let normed = centred / (var + 1e-5).sqrt();
+        normed * self.gamma.val().unsqueeze::<2>() + self.beta.val().unsqueeze::<2>()
+    }
+}
+
+/// The FERM encoder head on the flattened convs: Linear → [`FERM_Z_DIM`], LayerNorm.
+#[derive(Module, Debug)]
+pub struct FermHead {
+    /// Linear to `z_dim`.
+    pub fc: Linear,
+    /// LayerNorm.
+    pub ln: LayerNorm,
+}
+
+impl FermHead {
+    fn new(path: &str, din: usize, init: &Init, device: &Device) -> Self {
+        FermHead {
+            fc: Linear::new(&format!("{path}.fc"), din, FERM_Z_DIM, init, device),
+            ln: LayerNorm::new(FERM_Z_DIM, device),
+        }
+    }
+
+    /// `[B, D] → [B, z_dim]`.
+    pub fn forward(&self, h: Tensor<2>) -> Tensor<2> {
+        self.ln.forward(self.fc.forward(h))
+    }
+}
+
+/// A 3-layer MLP `din → w → w → dout` with ReLU between.
+#[derive(Module, Debug)]
+pub struct Mlp {
+    /// The three linear layers.
+    pub layers: Vec<Linear>,
+}
+
+impl Mlp {
+    fn new(path: &str, din: usize, w: usize, dout: usize, init: &Init, device: &Device) -> Self {
+        let dims = [(din, w), (w, w), (w, dout)];
+        Mlp {
+            layers: dims
+                .iter()
+                .enumerate()
+                .map(|(i, &(a, b))| Linear::new(&format!("{path}.{i}"), a, b, init, device))
+                .collect(),
+        }
+    }
+
+    /// `[B, din] → [B, dout]`.
+    pub fn forward(&self, x: Tensor<2>) -> Tensor<2> {
+        let last = self.layers.len() - 1;
+        self.layers.iter().enumerate().fold(x, |x, (i, l)| if i < last { relu(l.forward(x)) } else { l.forward(x) })
+    }
+}
+
+/// FERM's actor (docs/paper.md §1.10): the encoder convs (tied to the critic's: the trainer copies
+/// the critic's conv weights here, and the actor's loss does not reach them), its own Linear +
+/// LayerNorm, and separate mean and log-std MLPs `50 → 8n → 8n → 5`.
+#[derive(Module, Debug)]
+pub struct FermActor {
+    /// Encoder convs (copies of the critic's).
+    pub convs: FermConvs,
+    /// The actor's own encoder head.
+    pub head: FermHead,
+    /// Mean MLP.
+    pub mean: Mlp,
+    /// Log-std MLP.
+    pub log_std: Mlp,
+}
+
+impl FermActor {
+    /// Build with weights from `init`.
+    pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
+        let (convs, flat) = FermConvs::new("convs", cfg, init, device)?;
+        let w = ferm_mlp_width(cfg.hidden);
+        Ok(FermActor {
+            convs,
+            head: FermHead::new("head", flat, init, device),
+            mean: Mlp::new("mean", FERM_Z_DIM, w, 5, init, device),
+            log_std: Mlp::new("log_std", FERM_Z_DIM, w, 5, init, device),
+        })
+    }
+}
+
+impl Actor for FermActor {
+    /// The conv features are detached: the actor's loss trains its own head and MLPs only (the
+    /// convs are the critic's, as in CURL's `detach_encoder`).
+    fn forward(&self, obs: Tensor<4>) -> (Tensor<2>, Tensor<2>) {
+        let z = self.head.forward(self.convs.forward(obs).detach());
+        (self.mean.forward(z.clone()), self.log_std.forward(z).clamp(LOG_STD_MIN, LOG_STD_MAX))
+    }
+}
+
+/// FERM's critic: the encoder (convs, Linear, LayerNorm) and twin Q MLPs `50 + 5 → 8n → 8n → 1`.
+#[derive(Module, Debug)]
+pub struct FermCritic {
+    /// Encoder convs.
+    pub convs: FermConvs,
+    /// Encoder head.
+    pub head: FermHead,
+    /// Q1 MLP.
+    pub q1: Mlp,
+    /// Q2 MLP.
+    pub q2: Mlp,
+}
+
+impl FermCritic {
+    /// Build with weights from `init`.
+    pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
+        let (convs, flat) = FermConvs::new("convs", cfg, init, device)?;
+        let w = ferm_mlp_width(cfg.hidden);
+        Ok(FermCritic {
+            convs,
+            head: FermHead::new("head", flat, init, device),
+            q1: Mlp::new("q1", FERM_Z_DIM + 5, w, 1, init, device),
+            q2: Mlp::new("q2", FERM_Z_DIM + 5, w, 1, init, device),
+        })
+    }
+
+    /// The encoder's features `z` `[B, 50]` (CURL's anchor and positive).
+    pub fn encode(&self, obs: Tensor<4>) -> Tensor<2> {
+        self.head.forward(self.convs.forward(obs))
+    }
+}
+
+impl Critic for FermCritic {
+    fn forward(&self, obs: Tensor<4>, action: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
+        let x = Tensor::cat(vec![self.encode(obs), action], 1);
+        (self.q1.forward(x.clone()), self.q2.forward(x))
+    }
+}
+
+/// CURL's bilinear similarity `W` `[z, z]` (docs/paper.md §1.10), initialised uniform in ±1/√z.
+#[derive(Module, Debug)]
+pub struct CurlBilinear {
+    /// `W`.
+    pub w: burn::module::Param<Tensor<2>>,
+}
+
+impl CurlBilinear {
+    /// Build with weights from `init`.
+    pub fn new(init: &Init, device: &Device) -> Self {
+        let z = FERM_Z_DIM;
+        let w = init.uniform("curl.w", z * z, 1.0 / (z as f64).sqrt());
+        CurlBilinear {
+            w: burn::module::Param::from_tensor(Tensor::from_data(burn::tensor::TensorData::new(w, [z, z]), device)),
+        }
+    }
+
+    /// CURL's contrastive loss: logits `z_a · W · z_posᵀ` `[B, B]` with each row's maximum
+    /// subtracted (a detached constant, for stability), cross-entropy against the diagonal (each
+    /// anchor's positive is its own row's).
+    pub fn loss(&self, z_anchor: Tensor<2>, z_pos: Tensor<2>) -> Tensor<1> {
+        let logits = z_anchor.matmul(self.w.val().matmul(z_pos.transpose()));
+        let [b, _] = logits.dims();
+        let logits = logits.clone() - logits.detach().max_dim(1);
+        let log_p = burn::tensor::activation::log_softmax(logits, 1);
+        let eye = Tensor::<2>::eye(b, &log_p.device());
+        (log_p * eye).sum().div_scalar(b as f64).neg()
+    }
 }

@@ -105,6 +105,7 @@ fn batch(b: usize, s: usize, seed: u64) -> Batch {
         mask: (0..b).map(|i| (i % 7 != 0) as u8 as f32).collect(),
         expert: (0..b).map(|i| (i % 3 == 0) as u8 as f32).collect(),
         weight: vec![1.0; b],
+        curl: None,
     }
 }
 

@@ -29,14 +29,15 @@ use equiarm_nn::burn::optim::GradientsParams;
 use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
 use equiarm_nn::init::Init;
 use equiarm_nn::nets::{
-    Actor, CnnActor, CnnCritic, Critic, EquiActor, EquiCritic, NetConfig, SenActor, SenCritic, gaussian_sample,
+    Actor, CnnActor, CnnCritic, Critic, CurlBilinear, EquiActor, EquiCritic, FermActor, FermCritic, NetConfig,
+    SenActor, SenCritic, gaussian_sample,
 };
 use rand::SeedableRng as _;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::optim::{Adam, AdamParams, ScalarAdam, polyak};
+use crate::optim::{Adam, AdamParams, ScalarAdam, polyak, polyak_by};
 
 /// Errors of the agent.
 #[derive(Debug, Error)]
@@ -92,24 +93,29 @@ pub enum ModelKind {
     Cnn,
     /// SEN fc2: CNN encoder, equivariant heads.
     Sen,
+    /// FERM: CURL's encoder with MLP heads, contrastive pre-training and a contrastive step per
+    /// update (docs/paper.md §1.10).
+    Ferm,
 }
 
 impl ModelKind {
-    /// The name: `equi`, `cnn` or `sen`.
+    /// The name: `equi`, `cnn`, `sen` or `ferm`.
     pub fn name(self) -> &'static str {
         match self {
             ModelKind::Equi => "equi",
             ModelKind::Cnn => "cnn",
             ModelKind::Sen => "sen",
+            ModelKind::Ferm => "ferm",
         }
     }
 
-    /// Parse a name (`equi`, `equi_d4`, `cnn`, `sen`).
+    /// Parse a name (`equi`, `equi_d4`, `cnn`, `sen`, `ferm`).
     pub fn parse(s: &str) -> Option<Self> {
         match s {
             "equi" | "equi_d4" => Some(ModelKind::Equi),
             "cnn" => Some(ModelKind::Cnn),
             "sen" => Some(ModelKind::Sen),
+            "ferm" => Some(ModelKind::Ferm),
             _ => None,
         }
     }
@@ -156,6 +162,9 @@ pub struct AgentConfig {
     pub expert_weight: f64,
     /// Multiply the critic loss per row by PER's importance weights (the paper does not).
     pub use_is_weights: bool,
+    /// FERM only: contrastive (CURL) steps on the demonstrations before the first SAC update
+    /// (docs/paper.md §1.10: 1,600).
+    pub curl_pretrain_steps: usize,
 }
 
 impl Default for AgentConfig {
@@ -172,6 +181,7 @@ impl Default for AgentConfig {
             target_entropy: -5.0,
             expert_weight: 1.0,
             use_is_weights: false,
+            curl_pretrain_steps: 1600,
         }
     }
 }
@@ -210,6 +220,9 @@ pub struct Batch {
     pub expert: Vec<f32>,
     /// `[b]`: PER importance weights (used only with `use_is_weights`).
     pub weight: Vec<f32>,
+    /// FERM: the contrastive step's anchor and positive, two more independent crops of each obs,
+    /// `[b, 5, s, s]` each.
+    pub curl: Option<(Vec<f32>, Vec<f32>)>,
 }
 
 impl Batch {
@@ -235,6 +248,13 @@ impl Batch {
         {
             if v.len() != self.b {
                 return bad(what, v.len(), self.b);
+            }
+        }
+        if let Some((a, p)) = &self.curl {
+            for (what, v) in [("curl anchor", a), ("curl positive", p)] {
+                if v.len() != self.b * plane {
+                    return bad(what, v.len(), self.b * plane);
+                }
             }
         }
         Ok(())
@@ -278,33 +298,74 @@ impl Metrics {
     }
 }
 
-/// An actor network the agent can train: the `equiarm_nn` actors.
-pub trait ActorNet: Actor + Module + Clone + Send + 'static {
+/// An actor network the agent can train with critic `C`: the `equiarm_nn` actors.
+pub trait ActorNet<C>: Actor + Module + Clone + Send + 'static {
     /// A copy for fast inference (cached equivariant kernels where the net has them).
     fn for_inference(&self) -> Self;
+
+    /// The actor with the weights it shares with `critic` copied in (FERM's encoder convs);
+    /// called whenever the critic changed. The others share nothing.
+    fn tie(self, _critic: &C) -> Self {
+        self
+    }
 }
 
 /// A critic network the agent can train.
-pub trait CriticNet: Critic + Module + Clone + Send + 'static {}
+pub trait CriticNet: Critic + Module + Clone + Send + 'static {
+    /// The target network's Polyak update (docs/paper.md §2: τ for every weight).
+    fn soft_update(target: Self, online: &Self, tau: f64) -> Self {
+        polyak(target, online, tau)
+    }
 
-impl ActorNet for EquiActor {
+    /// The encoder's features for a contrastive loss (FERM), `None` for critics without one.
+    fn features(&self, _obs: Tensor<4>) -> Option<Tensor<2>> {
+        None
+    }
+}
+
+impl ActorNet<EquiCritic> for EquiActor {
     fn for_inference(&self) -> Self {
         self.valid().cache_kernels()
     }
 }
-impl ActorNet for CnnActor {
+impl ActorNet<CnnCritic> for CnnActor {
     fn for_inference(&self) -> Self {
         self.valid()
     }
 }
-impl ActorNet for SenActor {
+impl ActorNet<SenCritic> for SenActor {
     fn for_inference(&self) -> Self {
         self.valid()
+    }
+}
+impl ActorNet<FermCritic> for FermActor {
+    fn for_inference(&self) -> Self {
+        self.valid()
+    }
+
+    /// The critic's encoder convs, as CURL ties them (the actor's loss does not reach them).
+    fn tie(self, critic: &FermCritic) -> Self {
+        FermActor { convs: critic.convs.clone(), ..self }
     }
 }
 impl CriticNet for EquiCritic {}
 impl CriticNet for CnnCritic {}
 impl CriticNet for SenCritic {}
+
+/// FERM's Polyak coefficient of the target encoder (docs/paper.md §1.10; the Q heads keep τ).
+pub const FERM_ENCODER_TAU: f64 = 0.05;
+
+impl CriticNet for FermCritic {
+    fn soft_update(target: Self, online: &Self, tau: f64) -> Self {
+        polyak_by(target, online, &|path: &str| {
+            if path.starts_with("convs.") || path.starts_with("head.") { FERM_ENCODER_TAU } else { tau }
+        })
+    }
+
+    fn features(&self, obs: Tensor<4>) -> Option<Tensor<2>> {
+        Some(self.encode(obs))
+    }
+}
 
 /// The agent's saved scalar state (`agent.json` in a checkpoint).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -318,10 +379,26 @@ pub struct AgentState {
     pub alpha_adam: (u64, u64, u64),
     /// Noise RNG: seed, stream and word position (decimal).
     pub rng: (String, u64, String),
+    /// FERM: contrastive steps made (pre-training included).
+    #[serde(default)]
+    pub curl_steps: u64,
+    /// FERM: the contrastive pre-training is done.
+    #[serde(default)]
+    pub curl_pretrained: bool,
+}
+
+/// FERM's contrastive part: the bilinear `W` and the optimisers of `W` and of the critic's
+/// encoder under the contrastive loss (CURL's `cpc_optimizer` and `encoder_optimizer`).
+struct Curl {
+    w: CurlBilinear,
+    w_opt: Adam,
+    encoder_opt: Adam,
+    steps: u64,
+    pretrained: bool,
 }
 
 /// SAC agent over one actor/critic family.
-pub struct Sac<A: ActorNet, C: CriticNet> {
+pub struct Sac<A: ActorNet<C>, C: CriticNet> {
     cfg: AgentConfig,
     /// `plain` with autodiff: where the trained networks live.
     grad_device: Device,
@@ -337,12 +414,13 @@ pub struct Sac<A: ActorNet, C: CriticNet> {
     rng: ChaCha8Rng,
     updates: u64,
     inference: Option<A>,
+    curl: Option<Curl>,
 }
 
 /// Builds a network family.
 pub type Builder<T> = fn(&NetConfig, &Init, &Device) -> Result<T, equiarm_nn::nets::NetError>;
 
-impl<A: ActorNet, C: CriticNet> Sac<A, C> {
+impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
     /// A fresh agent on the CPU (`flex`): weights from `Init::new(seed)`, noise RNG from `seed`.
     pub fn build(cfg: AgentConfig, seed: u64, actor: Builder<A>, critic: Builder<C>) -> Result<Self, AgentError> {
         Self::build_on(cfg, seed, &equiarm_nn::device::cpu(), actor, critic)
@@ -366,9 +444,20 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         let actor = actor(&net, &init, &device).map_err(|source| AgentError::Net { model, source })?;
         let critic = critic(&net, &init, &device).map_err(|source| AgentError::Net { model, source })?;
         let target = critic.valid();
+        let actor = actor.tie(&critic);
         let adam = AdamParams::new(cfg.lr);
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         rng.set_stream(0x5ac);
+        let ferm = cfg.model == ModelKind::Ferm;
+        let curl = ferm.then(|| Curl {
+            w: CurlBilinear::new(&init, &device),
+            w_opt: Adam::new(adam),
+            encoder_opt: Adam::covering(adam, &critic, &plain),
+            steps: 0,
+            pretrained: false,
+        });
+        // FERM's actor convs never get a gradient (they are the critic's).
+        let actor_opt = if ferm { Adam::covering(adam, &actor, &plain) } else { Adam::new(adam) };
         Ok(Sac {
             log_alpha: cfg.init_alpha.ln(),
             cfg,
@@ -377,12 +466,13 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
             actor,
             critic,
             target,
-            actor_opt: Adam::new(adam),
+            actor_opt,
             critic_opt: Adam::new(adam),
             alpha_opt: ScalarAdam::new(adam),
             rng,
             updates: 0,
             inference: None,
+            curl,
         })
     }
 
@@ -402,6 +492,68 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         self.actor_opt.set_lr(lr);
         self.critic_opt.set_lr(lr);
         self.alpha_opt.set_lr(lr);
+        if let Some(c) = &mut self.curl {
+            c.w_opt.set_lr(lr);
+            c.encoder_opt.set_lr(lr);
+        }
+    }
+
+    /// FERM: whether the contrastive pre-training is still to be done (false for the others).
+    pub fn needs_curl_pretraining(&self) -> bool {
+        self.curl.as_ref().is_some_and(|c| !c.pretrained)
+    }
+
+    /// FERM: mark the contrastive pre-training done.
+    pub fn set_curl_pretrained(&mut self) {
+        if let Some(c) = &mut self.curl {
+            c.pretrained = true;
+        }
+    }
+
+    /// FERM: contrastive steps made so far (0 for the others).
+    pub fn curl_steps(&self) -> u64 {
+        self.curl.as_ref().map_or(0, |c| c.steps)
+    }
+
+    /// FERM: one contrastive (CURL) step on `b` anchor and positive crops `[b, 5, s, s]` (two
+    /// independent crops of the same observations): anchor features from the online critic's
+    /// encoder, positive features from the target encoder (no gradient); the loss updates `W` and the
+    /// critic's encoder. Returns the loss. An error for a model without a contrastive part.
+    pub fn curl_step(&mut self, anchor: Vec<f32>, positive: Vec<f32>, b: usize) -> Result<f32, AgentError> {
+        let s = self.cfg.input_size;
+        if anchor.len() != b * 5 * s * s || positive.len() != anchor.len() || b == 0 {
+            return Err(AgentError::Batch(format!(
+                "curl: {} and {} values for {b} crops of 5×{s}×{s}",
+                anchor.len(),
+                positive.len()
+            )));
+        }
+        let (dev, plain) = (self.grad_device.clone(), self.plain.clone());
+        let Some(curl) = self.curl.as_mut() else {
+            return Err(AgentError::Batch(format!(
+                "curl: the {} model has no contrastive part",
+                self.cfg.model.name()
+            )));
+        };
+        let xa = Tensor::<4>::from_data(TensorData::new(anchor, [b, 5, s, s]), &dev);
+        let xp = Tensor::<4>::from_data(TensorData::new(positive, [b, 5, s, s]), &plain);
+        let (Some(za), Some(zp)) = (self.critic.features(xa), self.target.features(xp)) else {
+            return Err(AgentError::Batch("curl: the critic has no encoder features".into()));
+        };
+        let loss = curl.w.loss(za, Tensor::from_inner(zp));
+        let value = scalar(loss.clone().inner());
+        if !value.is_finite() {
+            return Err(AgentError::NonFinite { update: self.updates, what: "curl loss", value });
+        }
+        let mut grads = loss.backward();
+        let g_encoder = GradientsParams::from_module(&mut grads, &self.critic);
+        let g_w = GradientsParams::from_module(&mut grads, &curl.w);
+        self.critic = curl.encoder_opt.step(self.critic.clone(), g_encoder);
+        curl.w = curl.w_opt.step(curl.w.clone(), g_w);
+        curl.steps += 1;
+        self.actor = self.actor.clone().tie(&self.critic);
+        self.inference = None;
+        Ok(value)
     }
 
     /// The device the agent's tensors live on (without autodiff).
@@ -511,6 +663,7 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         let grads = GradientsParams::from_grads(critic_loss.backward(), &self.critic);
         let critic = self.critic.clone();
         self.critic = self.critic_opt.step(critic, grads);
+        self.actor = self.actor.clone().tie(&self.critic);
 
         // --- actor step (critic weights fixed) on the same M crops, expert L2 on the sampled action.
         let eps = self.normal(m * b * 5);
@@ -542,8 +695,16 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         self.log_alpha = self.alpha_opt.step(self.log_alpha, g);
 
         // --- target.
-        self.target = polyak(self.target.clone(), &self.critic, self.cfg.tau);
+        self.target = C::soft_update(self.target.clone(), &self.critic, self.cfg.tau);
         self.updates += 1;
+
+        // --- FERM: one contrastive step on the batch's anchor and positive crops.
+        if self.curl.is_some() {
+            let Some((anchor, positive)) = batch.curl.take() else {
+                return Err(AgentError::Batch("FERM needs the batch's contrastive crops (Batch::curl)".into()));
+            };
+            self.curl_step(anchor, positive, b)?;
+        }
 
         let metrics = Metrics {
             qf1_loss,
@@ -611,7 +772,14 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
             log_alpha_bits: self.log_alpha.to_bits(),
             alpha_adam: (self.alpha_opt.step, self.alpha_opt.m.to_bits(), self.alpha_opt.v.to_bits()),
             rng: crate::rng::save_state(&self.rng),
+            curl_steps: self.curl_steps(),
+            curl_pretrained: self.curl.as_ref().is_some_and(|c| c.pretrained),
         };
+        if let Some(c) = &self.curl {
+            equiarm_nn::checkpoint::save(&c.w, &dir.join("curl.safetensors"))?;
+            c.w_opt.save(&dir.join("curl_optim.safetensors"))?;
+            c.encoder_opt.save(&dir.join("encoder_optim.safetensors"))?;
+        }
         let path = dir.join("agent.json");
         let text = serde_json::to_string_pretty(&state)
             .map_err(|e| AgentError::State { path: path.clone(), message: e.to_string() })?;
@@ -633,6 +801,14 @@ impl<A: ActorNet, C: CriticNet> Sac<A, C> {
         let adam = AdamParams::new(self.cfg.lr);
         let actor_opt = Adam::load(adam, &actor, &dir.join("actor_optim.safetensors"), &self.plain)?;
         let critic_opt = Adam::load(adam, &critic, &dir.join("critic_optim.safetensors"), &self.plain)?;
+        if let Some(c) = &mut self.curl {
+            let w = equiarm_nn::checkpoint::load(c.w.clone(), &dir.join("curl.safetensors"))?;
+            c.w_opt = Adam::load(adam, &w, &dir.join("curl_optim.safetensors"), &self.plain)?;
+            c.encoder_opt = Adam::load(adam, &critic, &dir.join("encoder_optim.safetensors"), &self.plain)?;
+            c.w = w;
+            c.steps = state.curl_steps;
+            c.pretrained = state.curl_pretrained;
+        }
         self.actor = actor;
         self.critic = critic;
         self.target = target;
@@ -682,6 +858,8 @@ pub enum Agent {
     Cnn(Sac<CnnActor, CnnCritic>),
     /// SEN.
     Sen(Sac<SenActor, SenCritic>),
+    /// FERM.
+    Ferm(Sac<FermActor, FermCritic>),
 }
 
 macro_rules! each {
@@ -690,6 +868,7 @@ macro_rules! each {
             Agent::Equi($a) => $e,
             Agent::Cnn($a) => $e,
             Agent::Sen($a) => $e,
+            Agent::Ferm($a) => $e,
         }
     };
 }
@@ -707,7 +886,28 @@ impl Agent {
             ModelKind::Equi => Agent::Equi(Sac::build_on(cfg, seed, device, EquiActor::new, EquiCritic::new)?),
             ModelKind::Cnn => Agent::Cnn(Sac::build_on(cfg, seed, device, CnnActor::new, CnnCritic::new)?),
             ModelKind::Sen => Agent::Sen(Sac::build_on(cfg, seed, device, SenActor::new, SenCritic::new)?),
+            ModelKind::Ferm => Agent::Ferm(Sac::build_on(cfg, seed, device, FermActor::new, FermCritic::new)?),
         })
+    }
+
+    /// See [`Sac::needs_curl_pretraining`].
+    pub fn needs_curl_pretraining(&self) -> bool {
+        each!(self, a => a.needs_curl_pretraining())
+    }
+
+    /// See [`Sac::set_curl_pretrained`].
+    pub fn set_curl_pretrained(&mut self) {
+        each!(self, a => a.set_curl_pretrained())
+    }
+
+    /// See [`Sac::curl_steps`].
+    pub fn curl_steps(&self) -> u64 {
+        each!(self, a => a.curl_steps())
+    }
+
+    /// See [`Sac::curl_step`].
+    pub fn curl_step(&mut self, anchor: Vec<f32>, positive: Vec<f32>, b: usize) -> Result<f32, AgentError> {
+        each!(self, a => a.curl_step(anchor, positive, b))
     }
 
     /// See [`Sac::device`].
@@ -877,7 +1077,76 @@ mod tests {
             mask: vec![1.0; b],
             expert: (0..b).map(|i| (i % 3 == 0) as u8 as f32).collect(),
             weight: vec![1.0; b],
+            curl: None,
         }
+    }
+
+    /// [`batch`] with FERM's contrastive crops.
+    fn ferm_batch(b: usize, s: usize, seed: u64) -> Batch {
+        let mut rng = crate::rng::stream(seed, 10);
+        let n = b * 5 * s * s;
+        Batch { curl: Some((crate::rng::normals(&mut rng, n), crate::rng::normals(&mut rng, n))), ..batch(b, s, seed) }
+    }
+
+    #[test]
+    fn ferm_learns_ties_its_actor_to_the_critic_and_resumes_bit_identically() {
+        let batches: Vec<Batch> = (0..6).map(|i| ferm_batch(6, 8, 10 + i)).collect();
+        let mut straight = Agent::new(tiny(ModelKind::Ferm), 5).unwrap();
+        let first = straight.update(batches[0].clone()).unwrap().0;
+        let mut last = first;
+        for _ in 0..30 {
+            last = straight.update(batches[0].clone()).unwrap().0;
+        }
+        assert!(last.qf1_loss < first.qf1_loss, "critic loss {} → {}", first.qf1_loss, last.qf1_loss);
+        assert_eq!(straight.curl_steps(), 31, "one contrastive step per update");
+        // the actor's convs are the critic's after every update; its head is its own
+        let Agent::Ferm(sac) = &straight else { panic!("a FERM agent") };
+        let (pa, pc) = (crate::optim::parameters(&sac.actor), crate::optim::parameters(&sac.critic));
+        let vals1 = |t: &Tensor<1>| t.clone().into_data().try_into_vec::<f32>().unwrap();
+        let convs: Vec<&String> = pa.keys().filter(|k| k.starts_with("convs.")).collect();
+        assert!(!convs.is_empty());
+        for k in convs {
+            assert_eq!(vals1(&pa[k]), vals1(&pc[k]), "{k}");
+        }
+        assert_ne!(vals1(&pa["head.fc.weight"]), vals1(&pc["head.fc.weight"]), "the actor's own encoder head");
+        // a FERM batch without contrastive crops is refused; other models have no contrastive step
+        let e = straight.update(batch(6, 8, 1)).unwrap_err().to_string();
+        assert!(e.contains("contrastive crops"), "{e}");
+        let mut cnn = Agent::new(tiny(ModelKind::Cnn), 5).unwrap();
+        let (a, p) = batches[0].curl.clone().unwrap();
+        assert!(cnn.curl_step(a, p, 6).unwrap_err().to_string().contains("no contrastive part"));
+
+        // save after 3 updates, load into a fresh agent, 3 more: the same weights as 6 straight
+        let dir_tmp = tempfile::tempdir().unwrap();
+        let dir = dir_tmp.path();
+        let mut straight = Agent::new(tiny(ModelKind::Ferm), 5).unwrap();
+        straight.set_curl_pretrained();
+        for b in &batches {
+            straight.update(b.clone()).unwrap();
+        }
+        let mut first = Agent::new(tiny(ModelKind::Ferm), 5).unwrap();
+        first.set_curl_pretrained();
+        for b in &batches[..3] {
+            first.update(b.clone()).unwrap();
+        }
+        first.save(dir).unwrap();
+        let mut resumed = Agent::new(tiny(ModelKind::Ferm), 99).unwrap();
+        assert!(resumed.needs_curl_pretraining());
+        resumed.load(dir).unwrap();
+        assert!(!resumed.needs_curl_pretraining(), "the pre-training is part of the checkpoint");
+        for b in &batches[3..] {
+            resumed.update(b.clone()).unwrap();
+        }
+        assert_eq!(resumed.curl_steps(), 6);
+        let (p1, p2) = (dir.join("a.safetensors"), dir.join("b.safetensors"));
+        straight.save_actor(&p1).unwrap();
+        resumed.save_actor(&p2).unwrap();
+        let read = |p: &Path| {
+            let mut t = crate::tensorfile::read(p).unwrap().tensors;
+            t.sort_by(|a, b| a.0.cmp(&b.0));
+            t
+        };
+        assert_eq!(read(&p1), read(&p2), "resumed FERM actor differs from the straight one");
     }
 
     #[test]

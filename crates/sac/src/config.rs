@@ -250,6 +250,19 @@ impl TrainConfig {
         if self.agent.hidden == 0 || !self.agent.hidden.is_multiple_of(8) {
             return err("agent.hidden", format!("{} must be a positive multiple of 8", self.agent.hidden));
         }
+        if self.agent.model == crate::agent::ModelKind::Ferm && self.augmentation != (Augmentation::Drq { k: 1, m: 1 })
+        {
+            return err(
+                "augmentation",
+                "FERM crops obs and next_obs independently (docs/paper.md §1.10): use drq with k = m = 1 ({\"drq\": {\"k\": 1, \"m\": 1}})".into(),
+            );
+        }
+        if self.agent.curl_pretrain_steps > 1_000_000 {
+            return err(
+                "agent.curl_pretrain_steps",
+                format!("{} is above 1000000 (the paper: 1600)", self.agent.curl_pretrain_steps),
+            );
+        }
         if self.agent.hidden > MAX_HIDDEN {
             return err(
                 "agent.hidden",

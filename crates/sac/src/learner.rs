@@ -18,7 +18,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::agent::{ActMode, Agent, AgentError, Batch, Metrics};
+use crate::agent::{ActMode, Agent, AgentError, Batch, Metrics, ModelKind};
 use crate::augment::{center_offset, centre_input, network_input, random_offset};
 use crate::config::{Augmentation, TrainConfig};
 use crate::frame::StoredFrame;
@@ -177,8 +177,12 @@ impl Learner {
         act_on(&mut self.agent, frames, self.cfg.agent.input_size, mode)
     }
 
-    /// Sample a batch, crop it, update the agent and the priorities.
+    /// Sample a batch, crop it, update the agent and the priorities. FERM's first call first makes
+    /// the contrastive pre-training ([`Learner::curl_pretrain`]).
     pub fn update(&mut self) -> Result<Metrics, LearnerError> {
+        if self.agent.needs_curl_pretraining() {
+            self.curl_pretrain()?;
+        }
         let beta = self.beta.value(self.agent.updates());
         if let Some(lr) = &self.lr {
             self.agent.set_lr(lr.value(self.agent.updates()));
@@ -191,8 +195,52 @@ impl Learner {
         Ok(metrics)
     }
 
+    /// FERM's contrastive pre-training (docs/paper.md §1.10): `agent.curl_pretrain_steps` contrastive
+    /// steps on batches drawn uniformly (with replacement) from the replay's expert transitions (all
+    /// transitions if it holds none), each with two independent random crops per observation.
+    pub fn curl_pretrain(&mut self) -> Result<(), LearnerError> {
+        use rand::Rng as _;
+        let mut pool: Vec<usize> =
+            (0..self.replay.len()).filter(|&i| self.replay.get(i).is_some_and(|t| t.expert)).collect();
+        if pool.is_empty() {
+            pool = (0..self.replay.len()).collect();
+        }
+        if pool.is_empty() {
+            return Err(
+                AgentError::Batch("FERM's contrastive pre-training needs transitions in the replay".into()).into()
+            );
+        }
+        for _ in 0..self.cfg.agent.curl_pretrain_steps {
+            let slots: Vec<usize> =
+                (0..self.cfg.batch_size).map(|_| pool[self.rng.random_range(0..pool.len())]).collect();
+            let (anchor, positive) = self.curl_crops(&slots)?;
+            self.agent.curl_step(anchor, positive, slots.len())?;
+        }
+        self.agent.set_curl_pretrained();
+        Ok(())
+    }
+
+    /// Two independent random crops of the obs of each of `slots` (FERM's anchor and positive).
+    fn curl_crops(&mut self, slots: &[usize]) -> Result<(Vec<f32>, Vec<f32>), LearnerError> {
+        let s = self.cfg.agent.input_size;
+        let size = self.cfg.image_size;
+        let mut frames = Vec::with_capacity(slots.len());
+        for &i in slots {
+            let t = self
+                .replay
+                .get(i)
+                .ok_or(crate::replay::ReplayError::SlotOutOfRange { slot: i, len: self.replay.len() })?;
+            frames.push(t.obs.clone());
+        }
+        let refs: Vec<&StoredFrame> = frames.iter().map(|f| &**f).collect();
+        let off_a: Vec<(usize, usize)> = slots.iter().map(|_| random_offset(&mut self.rng, size, s)).collect();
+        let off_p: Vec<(usize, usize)> = slots.iter().map(|_| random_offset(&mut self.rng, size, s)).collect();
+        Ok((network_input(&refs, &off_a, s)?, network_input(&refs, &off_p, s)?))
+    }
+
     /// The cropped batch for replay `slots` (RAD: one offset per transition shared by obs and
-    /// next_obs; DrQ: independent offsets per copy; centre: no randomness).
+    /// next_obs; DrQ: independent offsets per copy; centre: no randomness; FERM also gets its
+    /// contrastive crops).
     pub fn build_batch(&mut self, slots: &[usize], weights: &[f32]) -> Result<Batch, LearnerError> {
         let s = self.cfg.agent.input_size;
         let size = self.cfg.image_size;
@@ -245,19 +293,14 @@ impl Learner {
                 }
             }
         }
-        Ok(Batch {
-            b,
-            s,
-            m,
-            k,
-            obs: network_input(&obs_frames, &obs_off, s)?,
-            next_obs: network_input(&next_frames, &next_off, s)?,
-            action: rows.iter().flat_map(|r| r.action).collect(),
-            reward: rows.iter().map(|r| r.reward).collect(),
-            mask: rows.iter().map(|r| if r.done { 0.0 } else { 1.0 }).collect(),
-            expert: rows.iter().map(|r| if r.expert { 1.0 } else { 0.0 }).collect(),
-            weight: weights.to_vec(),
-        })
+        let obs = network_input(&obs_frames, &obs_off, s)?;
+        let next_obs = network_input(&next_frames, &next_off, s)?;
+        let action = rows.iter().flat_map(|r| r.action).collect();
+        let reward = rows.iter().map(|r| r.reward).collect();
+        let mask = rows.iter().map(|r| if r.done { 0.0 } else { 1.0 }).collect();
+        let expert = rows.iter().map(|r| if r.expert { 1.0 } else { 0.0 }).collect();
+        let curl = if self.cfg.agent.model == ModelKind::Ferm { Some(self.curl_crops(slots)?) } else { None };
+        Ok(Batch { b, s, m, k, obs, next_obs, action, reward, mask, expert, weight: weights.to_vec(), curl })
     }
 
     /// Write a checkpoint into `dir` (created; an existing one is replaced file by file).

@@ -70,6 +70,22 @@ impl Adam {
         Adam { params, step: 0, moments: BTreeMap::new() }
     }
 
+    /// A fresh optimiser holding zero moments for every parameter of `module` (on `device`, the
+    /// module's device without autodiff): it steps exactly as [`Adam::new`] (absent moments start
+    /// at zero), but its saved state covers every parameter, so it loads back even for a module
+    /// some of whose parameters never get a gradient (FERM's actor convs, which are the critic's; the
+    /// critic's Q heads under the contrastive loss).
+    pub fn covering<M: Module>(params: AdamParams, module: &M, device: &Device) -> Self {
+        let moments = equiarm_nn::checkpoint::parameter_shapes(module)
+            .into_iter()
+            .map(|(name, shape)| {
+                let n: usize = shape.iter().product();
+                (name, (shape, Tensor::zeros([n], device), Tensor::zeros([n], device)))
+            })
+            .collect();
+        Adam { params, step: 0, moments }
+    }
+
     /// Steps taken.
     pub fn steps(&self) -> u64 {
         self.step
@@ -287,12 +303,17 @@ pub fn parameters<M: Module>(module: &M) -> BTreeMap<String, Tensor<1>> {
 /// Polyak averaging `target ← (1 − τ)·target + τ·online` for every parameter path the two share
 /// (docs/paper.md §2: τ = 0.01 after every update). `target` lives on the plain device.
 pub fn polyak<M: Module>(target: M, online: &M, tau: f64) -> M {
-    struct Mix {
+    polyak_by(target, online, &|_| tau)
+}
+
+/// [`polyak`] with a coefficient per parameter path (FERM: its encoder at 0.05, the heads at τ).
+pub fn polyak_by<M: Module>(target: M, online: &M, tau_of: &dyn Fn(&str) -> f64) -> M {
+    struct Mix<'a> {
         path: Vec<String>,
         online: BTreeMap<String, Tensor<1>>,
-        tau: f64,
+        tau_of: &'a dyn Fn(&str) -> f64,
     }
-    impl ModuleMapper for Mix {
+    impl ModuleMapper for Mix<'_> {
         fn enter_module(&mut self, name: &str, _container_type: &str) {
             self.path.push(name.to_string());
         }
@@ -301,13 +322,15 @@ pub fn polyak<M: Module>(target: M, online: &M, tau: f64) -> M {
         }
         fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
             let (id, tensor, mapper) = param.consume();
-            let Some(o) = self.online.remove(&self.path.join(".")) else {
+            let path = self.path.join(".");
+            let Some(o) = self.online.remove(&path) else {
                 return Param::from_mapped_value(id, tensor, mapper);
             };
+            let tau = (self.tau_of)(&path);
             let dims = tensor.dims();
-            let mixed = tensor.mul_scalar(1.0 - self.tau) + o.reshape::<D, _>(dims).mul_scalar(self.tau);
+            let mixed = tensor.mul_scalar(1.0 - tau) + o.reshape::<D, _>(dims).mul_scalar(tau);
             Param::from_mapped_value(id, mixed, mapper)
         }
     }
-    target.map(&mut Mix { path: Vec::new(), online: parameters(online), tau })
+    target.map(&mut Mix { path: Vec::new(), online: parameters(online), tau_of })
 }

@@ -30,7 +30,7 @@ struct Args {
     sizes: Option<(usize, usize)>,
     /// Hidden size (default the reduced preset's).
     hidden: Option<usize>,
-    /// Network family: equi, cnn or sen (default the reduced preset's).
+    /// Network family: equi, cnn, sen or ferm (default the reduced preset's).
     #[arg(value_parser = parse_model)]
     model: Option<ModelKind>,
 }
@@ -42,7 +42,7 @@ fn parse_sizes(s: &str) -> anyhow::Result<(usize, usize)> {
 }
 
 fn parse_model(s: &str) -> anyhow::Result<ModelKind> {
-    ModelKind::parse(s).ok_or_else(|| anyhow::anyhow!("unknown model `{s}` (equi, cnn or sen)"))
+    ModelKind::parse(s).ok_or_else(|| anyhow::anyhow!("unknown model `{s}` (equi, cnn, sen or ferm)"))
 }
 
 fn main() {
