@@ -252,8 +252,8 @@ pub fn write(
             let series: Vec<Series> = by_variant
                 .iter()
                 .map(|(vi, runs_of)| {
-                    let label =
-                        VARIANTS.get(*vi).map_or("?".to_string(), |v| format!("{} ({} seeds)", v.label, runs_of.len()));
+                    let seeds = runs_of.iter().filter(|r| !r.evals.is_empty()).count();
+                    let label = VARIANTS.get(*vi).map_or("?".to_string(), |v| format!("{} ({seeds} seeds)", v.label));
                     let mut at: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
                     for r in runs_of {
                         for e in &r.evals {
