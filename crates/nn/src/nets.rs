@@ -775,15 +775,37 @@ impl Mlp {
     }
 }
 
-/// FERM's actor (docs/paper.md §1.10): the encoder convs (tied to the critic's: the trainer copies
-/// the critic's conv weights here, and the actor's loss does not reach them), its own Linear +
-/// LayerNorm, and separate mean and log-std MLPs `50 → 8n → 8n → 5`.
+/// FERM's encoder `CURLSACEncoder3`: the convs, then Linear → [`FERM_Z_DIM`] and LayerNorm.
+#[derive(Module, Debug)]
+pub struct FermEncoder {
+    /// The convs (the part the actor shares with the critic).
+    pub convs: FermConvs,
+    /// Linear + LayerNorm.
+    pub head: FermHead,
+}
+
+impl FermEncoder {
+    /// Build with weights from `init`, parameter paths below `path`.
+    pub fn new(path: &str, cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
+        let (convs, flat) = FermConvs::new(&format!("{path}.convs"), cfg, init, device)?;
+        Ok(FermEncoder { convs, head: FermHead::new(&format!("{path}.head"), flat, init, device) })
+    }
+
+    /// `[B, C, S, S] → [B, z_dim]`; with `detach_convs` no gradient reaches the convs (CURL's
+    /// `detach_encoder`).
+    pub fn forward(&self, obs: Tensor<4>, detach_convs: bool) -> Tensor<2> {
+        let h = self.convs.forward(obs);
+        self.head.forward(if detach_convs { h.detach() } else { h })
+    }
+}
+
+/// FERM's actor (docs/paper.md §1.10): an encoder whose convs are the critic's (the trainer copies
+/// them in, and the actor's loss does not reach them) with its own Linear + LayerNorm, and separate
+/// mean and log-std MLPs `50 → 8n → 8n → 5`.
 #[derive(Module, Debug)]
 pub struct FermActor {
-    /// Encoder convs (copies of the critic's).
-    pub convs: FermConvs,
-    /// The actor's own encoder head.
-    pub head: FermHead,
+    /// Encoder (convs copied from the critic's).
+    pub enc: FermEncoder,
     /// Mean MLP.
     pub mean: Mlp,
     /// Log-std MLP.
@@ -793,11 +815,9 @@ pub struct FermActor {
 impl FermActor {
     /// Build with weights from `init`.
     pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
-        let (convs, flat) = FermConvs::new("convs", cfg, init, device)?;
         let w = ferm_mlp_width(cfg.hidden);
         Ok(FermActor {
-            convs,
-            head: FermHead::new("head", flat, init, device),
+            enc: FermEncoder::new("enc", cfg, init, device)?,
             mean: Mlp::new("mean", FERM_Z_DIM, w, 5, init, device),
             log_std: Mlp::new("log_std", FERM_Z_DIM, w, 5, init, device),
         })
@@ -805,21 +825,18 @@ impl FermActor {
 }
 
 impl Actor for FermActor {
-    /// The conv features are detached: the actor's loss trains its own head and MLPs only (the
-    /// convs are the critic's, as in CURL's `detach_encoder`).
+    /// The conv features are detached: the actor's loss trains its own head and MLPs only.
     fn forward(&self, obs: Tensor<4>) -> (Tensor<2>, Tensor<2>) {
-        let z = self.head.forward(self.convs.forward(obs).detach());
+        let z = self.enc.forward(obs, true);
         (self.mean.forward(z.clone()), self.log_std.forward(z).clamp(LOG_STD_MIN, LOG_STD_MAX))
     }
 }
 
-/// FERM's critic: the encoder (convs, Linear, LayerNorm) and twin Q MLPs `50 + 5 → 8n → 8n → 1`.
+/// FERM's critic: the encoder and twin Q MLPs `50 + 5 → 8n → 8n → 1`.
 #[derive(Module, Debug)]
 pub struct FermCritic {
-    /// Encoder convs.
-    pub convs: FermConvs,
-    /// Encoder head.
-    pub head: FermHead,
+    /// Encoder.
+    pub enc: FermEncoder,
     /// Q1 MLP.
     pub q1: Mlp,
     /// Q2 MLP.
@@ -829,11 +846,9 @@ pub struct FermCritic {
 impl FermCritic {
     /// Build with weights from `init`.
     pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
-        let (convs, flat) = FermConvs::new("convs", cfg, init, device)?;
         let w = ferm_mlp_width(cfg.hidden);
         Ok(FermCritic {
-            convs,
-            head: FermHead::new("head", flat, init, device),
+            enc: FermEncoder::new("enc", cfg, init, device)?,
             q1: Mlp::new("q1", FERM_Z_DIM + 5, w, 1, init, device),
             q2: Mlp::new("q2", FERM_Z_DIM + 5, w, 1, init, device),
         })
@@ -841,7 +856,7 @@ impl FermCritic {
 
     /// The encoder's features `z` `[B, 50]` (CURL's anchor and positive).
     pub fn encode(&self, obs: Tensor<4>) -> Tensor<2> {
-        self.head.forward(self.convs.forward(obs))
+        self.enc.forward(obs, false)
     }
 }
 

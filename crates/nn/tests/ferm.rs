@@ -67,16 +67,16 @@ fn the_actor_trains_its_head_not_the_convs() {
     let x = randn(1, "obs", [2, 5, 16, 16], &dev);
     let (mean, log_std) = actor.forward(x);
     let grads = (mean.sum() + log_std.sum()).backward();
-    let conv_w = &actor.convs.convs[0].weight;
+    let conv_w = &actor.enc.convs.convs[0].weight;
     assert!(conv_w.val().grad(&grads).is_none(), "no gradient reaches the tied convs");
-    assert!(actor.head.fc.weight.val().grad(&grads).is_some());
+    assert!(actor.enc.head.fc.weight.val().grad(&grads).is_some());
     assert!(actor.mean.layers[0].weight.val().grad(&grads).is_some());
     // the critic's encoder does get gradients from its Q values
     let critic = FermCritic::new(&cfg, &Init::new(0), &dev).unwrap();
     let (q1, _) =
         equiarm_nn::nets::Critic::forward(&critic, randn(2, "obs", [2, 5, 16, 16], &dev), randn(3, "a", [2, 5], &dev));
     let grads = q1.sum().backward();
-    assert!(critic.convs.convs[0].weight.val().grad(&grads).is_some());
+    assert!(critic.enc.convs.convs[0].weight.val().grad(&grads).is_some());
     assert_eq!(
         actor.num_params(),
         critic.num_params() - 2 * (55 * 64 + 64 + 64 * 64 + 64 + 65) + 2 * (50 * 64 + 64 + 64 * 64 + 64 + 64 * 5 + 5)

@@ -80,8 +80,8 @@ fn ferm_counts() {
     // docs/paper.md §1.7: the actor 1,794,912 (the paper's 1.79M), the critic 1,795,928 (derived;
     // the paper prints 1.90M, treated as an erratum there).
     let actor = FermActor::new(&cfg, &init, &dev).unwrap();
-    assert_eq!(actor.convs.num_params(), 392_896);
-    assert_eq!(actor.head.num_params(), 16_384 * 50 + 50 + 100);
+    assert_eq!(actor.enc.convs.num_params(), 392_896);
+    assert_eq!(actor.enc.head.num_params(), 16_384 * 50 + 50 + 100);
     assert_eq!(actor.num_params(), 1_794_912);
     assert_eq!(FermCritic::new(&cfg, &init, &dev).unwrap().num_params(), 1_795_928);
 }

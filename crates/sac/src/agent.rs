@@ -29,8 +29,8 @@ use equiarm_nn::burn::optim::GradientsParams;
 use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
 use equiarm_nn::init::Init;
 use equiarm_nn::nets::{
-    Actor, CnnActor, CnnCritic, Critic, CurlBilinear, EquiActor, EquiCritic, FermActor, FermCritic, NetConfig,
-    SenActor, SenCritic, gaussian_sample,
+    Actor, CnnActor, CnnCritic, Critic, CurlBilinear, EquiActor, EquiCritic, FermActor, FermCritic, FermEncoder,
+    NetConfig, SenActor, SenCritic, gaussian_sample,
 };
 use rand::SeedableRng as _;
 use rand_chacha::ChaCha8Rng;
@@ -345,7 +345,7 @@ impl ActorNet<FermCritic> for FermActor {
 
     /// The critic's encoder convs, as CURL ties them (the actor's loss does not reach them).
     fn tie(self, critic: &FermCritic) -> Self {
-        FermActor { convs: critic.convs.clone(), ..self }
+        FermActor { enc: FermEncoder { convs: critic.enc.convs.clone(), ..self.enc }, ..self }
     }
 }
 impl CriticNet for EquiCritic {}
@@ -358,7 +358,7 @@ pub const FERM_ENCODER_TAU: f64 = 0.05;
 impl CriticNet for FermCritic {
     fn soft_update(target: Self, online: &Self, tau: f64) -> Self {
         polyak_by(target, online, &|path: &str| {
-            if path.starts_with("convs.") || path.starts_with("head.") { FERM_ENCODER_TAU } else { tau }
+            if path.starts_with("enc.") { FERM_ENCODER_TAU } else { tau }
         })
     }
 
@@ -1081,6 +1081,14 @@ mod tests {
         }
     }
 
+    /// A weights file's tensors sorted by name: compare tensors, not bytes (the safetensors header
+    /// order is not fixed).
+    fn sorted_tensors(p: &Path) -> Vec<(String, Vec<usize>, Vec<f32>)> {
+        let mut t = crate::tensorfile::read(p).unwrap().tensors;
+        t.sort_by(|a, b| a.0.cmp(&b.0));
+        t
+    }
+
     /// [`batch`] with FERM's contrastive crops.
     fn ferm_batch(b: usize, s: usize, seed: u64) -> Batch {
         let mut rng = crate::rng::stream(seed, 10);
@@ -1103,12 +1111,12 @@ mod tests {
         let Agent::Ferm(sac) = &straight else { panic!("a FERM agent") };
         let (pa, pc) = (crate::optim::parameters(&sac.actor), crate::optim::parameters(&sac.critic));
         let vals1 = |t: &Tensor<1>| t.clone().into_data().try_into_vec::<f32>().unwrap();
-        let convs: Vec<&String> = pa.keys().filter(|k| k.starts_with("convs.")).collect();
+        let convs: Vec<&String> = pa.keys().filter(|k| k.starts_with("enc.convs.")).collect();
         assert!(!convs.is_empty());
         for k in convs {
             assert_eq!(vals1(&pa[k]), vals1(&pc[k]), "{k}");
         }
-        assert_ne!(vals1(&pa["head.fc.weight"]), vals1(&pc["head.fc.weight"]), "the actor's own encoder head");
+        assert_ne!(vals1(&pa["enc.head.fc.weight"]), vals1(&pc["enc.head.fc.weight"]), "the actor's own encoder head");
         // a FERM batch without contrastive crops is refused; other models have no contrastive step
         let e = straight.update(batch(6, 8, 1)).unwrap_err().to_string();
         assert!(e.contains("contrastive crops"), "{e}");
@@ -1141,12 +1149,7 @@ mod tests {
         let (p1, p2) = (dir.join("a.safetensors"), dir.join("b.safetensors"));
         straight.save_actor(&p1).unwrap();
         resumed.save_actor(&p2).unwrap();
-        let read = |p: &Path| {
-            let mut t = crate::tensorfile::read(p).unwrap().tensors;
-            t.sort_by(|a, b| a.0.cmp(&b.0));
-            t
-        };
-        assert_eq!(read(&p1), read(&p2), "resumed FERM actor differs from the straight one");
+        assert_eq!(sorted_tensors(&p1), sorted_tensors(&p2), "resumed FERM actor differs from the straight one");
     }
 
     #[test]
@@ -1224,13 +1227,7 @@ mod tests {
         let (p1, p2) = (dir.join("a.safetensors"), dir.join("b.safetensors"));
         straight.save_actor(&p1).unwrap();
         resumed.save_actor(&p2).unwrap();
-        // Compare tensors, not bytes: the safetensors header order is not fixed.
-        let read = |p: &Path| {
-            let mut t = crate::tensorfile::read(p).unwrap().tensors;
-            t.sort_by(|a, b| a.0.cmp(&b.0));
-            t
-        };
-        let (ta, tb) = (read(&p1), read(&p2));
+        let (ta, tb) = (sorted_tensors(&p1), sorted_tensors(&p2));
         assert!(!ta.is_empty() && ta == tb, "resumed actor differs from the straight one");
         assert_eq!(straight.alpha(), resumed.alpha());
         // A checkpoint of another architecture is refused, naming the file.
