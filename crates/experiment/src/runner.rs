@@ -23,7 +23,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use equiarm_sac::config::TrainConfig;
-use equiarm_sac::learner::{Learner, read_json, write_json};
+use equiarm_sac::learner::{Learner, first_difference, read_json, write_json};
 use equiarm_train::evaluation::{EvalResult, Stream, evaluate_on};
 use equiarm_train::inprocess::RunOptions;
 use equiarm_train::rundir::{RUN_FILES, RunDirLock, find_checkpoint};
@@ -74,8 +74,12 @@ pub fn run_state(dir: &Path, cfg: &TrainConfig) -> Result<RunState> {
         let old: TrainConfig = read_json(&cfg_file).map_err(|e| bad(format!("config.json: {e}")))?;
         if &old != cfg {
             return Err(bad(format!(
-                "was started with another config than the grid gives now ({}); restore the grid file, or move the run away to start it afresh",
-                differences(&old, cfg).join(", ")
+                "was started with another config than the grid gives now (first difference: `{}`); restore the grid file, or move the run away to start it afresh",
+                first_difference(
+                    &serde_json::to_value(&old).unwrap_or_default(),
+                    &serde_json::to_value(cfg).unwrap_or_default(),
+                    ""
+                )
             )));
         }
     }
@@ -95,29 +99,6 @@ pub fn run_state(dir: &Path, cfg: &TrainConfig) -> Result<RunState> {
         return Ok(RunState::Partial(updates));
     }
     Ok(RunState::New)
-}
-
-/// The top-level config fields (and `agent.*` fields) in which `a` and `b` differ.
-fn differences(a: &TrainConfig, b: &TrainConfig) -> Vec<String> {
-    let (a, b) = (serde_json::to_value(a).unwrap_or_default(), serde_json::to_value(b).unwrap_or_default());
-    let mut out = Vec::new();
-    if let (Some(a), Some(b)) = (a.as_object(), b.as_object()) {
-        for (k, va) in a {
-            let vb = b.get(k);
-            match (va.as_object(), vb.and_then(|v| v.as_object())) {
-                (Some(oa), Some(ob)) => {
-                    for (kk, x) in oa {
-                        if ob.get(kk) != Some(x) {
-                            out.push(format!("{k}.{kk}: {x} → {}", ob.get(kk).cloned().unwrap_or_default()));
-                        }
-                    }
-                }
-                _ if vb != Some(va) => out.push(format!("{k}: {va} → {}", vb.cloned().unwrap_or_default())),
-                _ => {}
-            }
-        }
-    }
-    out
 }
 
 /// The child's side: train the run in `dir` (its `config.json`) from scratch or from its latest

@@ -421,7 +421,8 @@ pub fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, JsonFil
     serde_json::from_str(&text).map_err(|source| JsonFileError::Json { path: path.into(), source })
 }
 
-fn first_difference(a: &serde_json::Value, b: &serde_json::Value, prefix: &str) -> String {
+/// The dotted path of the first field in which two JSON values (configs) differ, below `prefix`.
+pub fn first_difference(a: &serde_json::Value, b: &serde_json::Value, prefix: &str) -> String {
     match (a, b) {
         (serde_json::Value::Object(x), serde_json::Value::Object(y)) => {
             for (k, va) in x {
