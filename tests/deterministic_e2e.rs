@@ -150,7 +150,11 @@ fn weights(run_dir: &Path) -> Vec<(String, Vec<u8>)> {
 fn checked_stream(name: &str, run_dir: &Path) -> BTreeMap<(String, u64), Vec<u8>> {
     let stream = transitions(&run_dir.join("bag"));
     let r = rounds(run_dir);
-    assert!(r > UPDATES, "{name}: {r} rounds for {UPDATES} updates (one update per round once the replay is ready)");
+    assert!(
+        r > UPDATES,
+        "{name}: {r} rounds for {UPDATES} updates (one update per round once the replay is ready); trainer log:\n{}",
+        log(run_dir, "trainer")
+    );
     let counts = per_env(&stream);
     assert_eq!(
         counts,

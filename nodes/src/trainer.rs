@@ -135,28 +135,49 @@ impl Node {
 }
 
 /// Lock-step: a transition a sim sends before it has matched this trainer's reader is lost and
-/// stalls every round, so the first weights (which start the envs) wait until `/transitions` and
-/// `/episodes` have at least `n` writers each and their counts held still for a second (at most 60 s).
-async fn wait_for_sims(n: &Node, envs: usize, stop: &AtomicBool) {
+/// stalls every round, so the first weights (which start the envs) wait until every training env's
+/// sim has been heard on its `observation` topic (a sim re-publishes its first observation until it
+/// is answered; the frames go to the trainer) and `/transitions` and `/episodes` have at least `n`
+/// writers each, the counts held still for a second (at most 60 s). The `/transitions` and
+/// `/episodes` readers are created before the observation readers, so a sim that has matched this
+/// node's observation reader has been told of them first. Counting writers alone is not enough: the
+/// eval sim writes on `/transitions` too.
+async fn wait_for_sims(n: &mut Node, envs: &[String], stop: &AtomicBool) -> anyhow::Result<()> {
     let (t0, mut last, mut since) = (Instant::now(), (0, 0), Instant::now());
+    let mut heard = vec![false; n.observations.len()];
     loop {
+        for (sub, heard) in n.observations.iter().zip(heard.iter_mut()) {
+            while let Some((o, _)) = sub.recv_timeout(Duration::ZERO).await? {
+                n.trainer.observation(&o);
+                *heard = true;
+            }
+        }
         let now = (n.transitions.publisher_count(&n.node), n.episodes.publisher_count(&n.node));
         if now != last {
             (last, since) = (now, Instant::now());
         }
-        if now.0 >= envs && now.1 >= envs && since.elapsed() >= Duration::from_secs(1) {
-            info!("{}: {} writers on /transitions, {} on /episodes; starting the rounds", n.node.name(), now.0, now.1);
-            return;
+        let all_heard = heard.iter().all(|h| *h);
+        if all_heard && now.0 >= envs.len() && now.1 >= envs.len() && since.elapsed() >= Duration::from_secs(1) {
+            info!(
+                "{}: every training env heard, {} writers on /transitions, {} on /episodes; starting the rounds",
+                n.node.name(),
+                now.0,
+                now.1
+            );
+            return Ok(());
         }
         if stop.load(Ordering::Relaxed) || t0.elapsed() > Duration::from_secs(60) {
+            let silent: Vec<&str> = envs.iter().zip(&heard).filter(|(_, h)| !**h).map(|(e, _)| e.as_str()).collect();
             warn!(
-                "{}: {} writers on /transitions and {} on /episodes after {:.0} s (num_envs {envs}); starting anyway",
+                "{}: {} writers on /transitions and {} on /episodes after {:.0} s (num_envs {}), no observation yet from [{}]; starting anyway",
                 n.node.name(),
                 now.0,
                 now.1,
-                t0.elapsed().as_secs_f64()
+                t0.elapsed().as_secs_f64(),
+                envs.len(),
+                silent.join(", ")
             );
-            return;
+            return Ok(());
         }
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
@@ -179,13 +200,16 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     let stop = stop_flag();
     let mut node = RosNode::new("/", "trainer", opts)?;
     let envs = args.env_namespaces(num_envs);
+    // (the transition and episode readers first: see wait_for_sims)
+    let transitions = node.subscription::<Transition>("/transitions", qos::stream(100))?;
+    let episodes = node.subscription::<EpisodeResult>("/episodes", qos::stream(100))?;
     let topics = envs.iter().map(|ns| format!("{}/observation", ns.trim_end_matches('/')));
     let observations =
         topics.map(|t| node.subscription::<Observation>(&t, qos::command())).collect::<Result<_, _>>()?;
     let mut n = Node {
         observations,
-        transitions: node.subscription::<Transition>("/transitions", qos::stream(100))?,
-        episodes: node.subscription::<EpisodeResult>("/episodes", qos::stream(100))?,
+        transitions,
+        episodes,
         weights: node.publisher::<PolicyWeights>("/policy/weights", qos::latched())?,
         status: node.publisher::<TrainerStatus>("/trainer/status", qos::stream(10))?,
         node,
@@ -195,7 +219,7 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
         stopping: None,
     };
     if deterministic {
-        wait_for_sims(&n, num_envs, &stop).await;
+        wait_for_sims(&mut n, &envs, &stop).await?;
     }
     let idle = Duration::from_secs_f64(args.idle_timeout_s.max(0.1));
     let mode = if deterministic { ", deterministic lock-step" } else { "" };
