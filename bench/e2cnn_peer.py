@@ -55,6 +55,15 @@ def patch_e2cnn():
         "full_mask[mask] = norms.to(torch.uint8)", "full_mask[mask] = norms")
     if fixed != src:
         open(f, "w").write(fixed)
+    # It also calls ndarray.tostring(), which numpy 2 removed (tobytes() is the same); the GPU
+    # machine's numpy is 2.x.
+    for root, _, files in os.walk(os.path.dirname(spec.origin)):
+        for name in files:
+            if name.endswith(".py"):
+                path = os.path.join(root, name)
+                src = open(path).read()
+                if ".tostring()" in src:
+                    open(path, "w").write(src.replace(".tostring()", ".tobytes()"))
 
 
 CONFIGS = {"paper": (64, 128), "reduced": (16, 64)}  # (hidden, input size), as NetConfig

@@ -16,7 +16,10 @@ Run with any python3: it re-executes itself in the venv of e2cnn_peer.py (torch 
 created on first use). Prints one JSON object: {"model", "config", "threads", "update_s",
 "act_b1_s", "updates", "acts", "peak_rss_mb"}.
 
-Usage: sac_update_peer.py --model equi|cnn --config reduced16|paper [--threads 1] [--reps 5]
+Usage: sac_update_peer.py --model equi|cnn --config reduced16|paper [--threads 1] [--reps 5] [--device cpu|cuda]
+
+On `--device cuda` the networks, batch and Adam state live on the GPU and each timing waits for it
+(torch.cuda.synchronize); bench/gpu_check.sh runs it so beside equiarm's GPU build.
 """
 import argparse
 import json
@@ -150,31 +153,34 @@ def main():
     ap.add_argument("--config", choices=list(CONFIGS), required=True)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--reps", type=int, default=5)
+    ap.add_argument("--device", default="cpu")
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
     torch.manual_seed(0)
     hidden, size, batch = CONFIGS[a.config]
-    actor, critic, target = (build_equi if a.model == "equi" else build_cnn)(hidden, size)
+    dev = torch.device(a.device)
+    sync = torch.cuda.synchronize if dev.type == "cuda" else (lambda: None)
+    actor, critic, target = (m.to(dev) for m in (build_equi if a.model == "equi" else build_cnn)(hidden, size))
     target.load_state_dict(critic.state_dict())
     for p in target.parameters():
         p.requires_grad_(False)
     actor_opt = torch.optim.Adam(actor.parameters(), lr=1e-3)
     critic_opt = torch.optim.Adam(critic.parameters(), lr=1e-3)
-    log_alpha = torch.tensor(math.log(1e-2), requires_grad=True)
+    log_alpha = torch.tensor(math.log(1e-2), device=dev, requires_grad=True)
     alpha_opt = torch.optim.Adam([log_alpha], lr=1e-3)
-    obs = torch.randn(batch, 5, size, size)
-    next_obs = torch.randn(batch, 5, size, size)
-    action = torch.tanh(torch.randn(batch, 5))
-    reward = (torch.arange(batch) % 7 == 0).float().reshape(batch, 1)
+    obs = torch.randn(batch, 5, size, size, device=dev)
+    next_obs = torch.randn(batch, 5, size, size, device=dev)
+    action = torch.tanh(torch.randn(batch, 5, device=dev))
+    reward = (torch.arange(batch, device=dev) % 7 == 0).float().reshape(batch, 1)
     mask = 1 - reward
-    expert = (torch.arange(batch) % 3 == 0).float().reshape(batch, 1)
+    expert = (torch.arange(batch, device=dev) % 3 == 0).float().reshape(batch, 1)
     gamma, tau, target_entropy = 0.99, 0.01, -5.0
 
     def update():
         alpha = log_alpha.exp().item()
         with torch.no_grad():
             mn, ls = actor(next_obs)
-            a_next, logp_next = sample(mn, ls, torch.randn(batch, 5))
+            a_next, logp_next = sample(mn, ls, torch.randn(batch, 5, device=dev))
             q1t, q2t = target(next_obs, a_next)
             y = reward + mask * gamma * (torch.min(q1t, q2t) - alpha * logp_next)
         q1, q2 = critic(obs, action)
@@ -185,7 +191,7 @@ def main():
         for p in critic.parameters():
             p.requires_grad_(False)
         mean, log_std = actor(obs)
-        a_pi, logp = sample(mean, log_std, torch.randn(batch, 5))
+        a_pi, logp = sample(mean, log_std, torch.randn(batch, 5, device=dev))
         q1a, q2a = critic(obs, a_pi)
         actor_loss = (alpha * logp - torch.min(q1a, q2a)).mean()
         actor_loss = actor_loss + ((a_pi - action).pow(2) * expert).sum() / (expert.sum() * 5)
@@ -204,10 +210,14 @@ def main():
         return critic_loss.item()
 
     update()  # warm-up
+    if dev.type == "cuda":
+        update()  # the first CUDA steps also pick their kernels (cuDNN)
+    sync()
     times = []
     for _ in range(a.reps):
         t0 = time.perf_counter()
         update()
+        sync()
         times.append(time.perf_counter() - t0)
     actor.eval()
     one = obs[:1]
@@ -217,11 +227,12 @@ def main():
         for _ in range(max(5, 5 * a.reps)):
             t0 = time.perf_counter()
             torch.tanh(actor(one)[0])
+            sync()
             acts.append(time.perf_counter() - t0)
     times.sort()
     acts.sort()
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    print(json.dumps({"model": a.model, "config": a.config, "threads": a.threads,
+    print(json.dumps({"model": a.model, "config": a.config, "threads": a.threads, "device": a.device,
                       "update_s": times[len(times) // 2], "act_b1_s": acts[len(acts) // 2],
                       "updates": len(times), "acts": len(acts), "peak_rss_mb": rss}), flush=True)
 

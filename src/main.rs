@@ -82,6 +82,13 @@ enum Command {
         after_help = "Examples:\n  equiarm experiment run tasks --parallel 2\n  equiarm experiment status tasks\n  equiarm experiment report tasks"
     )]
     Experiment(equiarm_experiment::cli::ExperimentCommand),
+    /// Times the learner on a device beside the CPU (median SAC update and batch-1 action per
+    /// network family, peak device memory), then trains Equi SAC there for a few minutes
+    /// (docs/backends.md, "GPU check"). Writes RUN_DIR/device_check.json.
+    #[command(
+        after_help = "Examples:\n  equiarm device-check --device vulkan --size paper --run-minutes 5\n  equiarm device-check --device vulkan:cpu --size reduced16 --reps 3 --run-minutes 1\n  equiarm device-check --device cpu --size reduced16 --no-cpu --run-minutes 0"
+    )]
+    DeviceCheck(equiarm_train::device_check::DeviceCheckArgs),
 }
 
 #[derive(clap::Args)]
@@ -342,6 +349,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 rt.block_on(echo::<M>(&opts, &topic, qos, count, std::io::stdout().lock()))
             })??;
             log::info!("printed {n} messages from {topic}");
+        }
+        Command::DeviceCheck(a) => {
+            equiarm_train::device_check::device_check(&a)?;
         }
         Command::Record(a) => {
             let mut topics = Vec::new();

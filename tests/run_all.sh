@@ -41,4 +41,9 @@ echo "== Python tests"
 # The launch-script examples drive real nodes over DDS: same private namespace, our binary.
 export EQUIARM_BIN="$CARGO_TARGET_DIR/debug/equiarm"
 "${ns[@]}" bash -c "$netup; cd tests/python && exec \"\$EQUIARM_PYTHON\" -m pytest -q"
+echo "== GPU build: its device tests on Mesa's lavapipe, a Vulkan driver on the CPU (docs/backends.md)"
+# Workspace-wide, so that only the crates on burn rebuild with its wgpu runtime (`-p` would resolve
+# other crates' features differently and rebuild nearly everything).
+source tests/vulkan_env.sh
+VK_ICD_FILENAMES="$EQUIARM_LAVAPIPE_ICD" cargo test --locked --workspace --features equiarm_train/vulkan --test vulkan_device
 echo "== all tests passed in $(( $(date +%s) - start )) s"

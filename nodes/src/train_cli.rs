@@ -97,9 +97,9 @@ pub struct TrainArgs {
     /// Resume from a checkpoint directory, or from a run directory's latest checkpoint.
     #[arg(long)]
     pub resume: Option<PathBuf>,
-    /// Where the learner's networks run: cpu (default), cuda or cuda:N (an NVIDIA GPU; needs a
-    /// binary built with `--features cuda`). Checked at start. Not part of the config: checkpoints
-    /// resume on any.
+    /// Where the learner's networks, batches and Adam state live: cpu (default), or in the GPU
+    /// build (`--features vulkan`) vulkan, vulkan:N (discrete GPU N) or vulkan:cpu (a CPU Vulkan
+    /// driver such as lavapipe). Checked at start. Not part of the config: checkpoints resume on any.
     #[arg(long, default_value = "cpu", value_parser = equiarm_nn::device::open)]
     pub device: Device,
     /// Print the resulting config as JSON and exit.

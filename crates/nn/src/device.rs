@@ -1,8 +1,9 @@
 //! Where tensors live, chosen at run time by name: `cpu` (burn's pure-Rust `flex` backend, the
-//! default, with our own convolution kernels) or `cuda` / `cuda:N` (an NVIDIA GPU through burn's
-//! CubeCL CUDA backend; only in a binary built with the `cuda` feature). `torch` (libtorch through
-//! burn's `tch` backend) was removed once `cpu` became faster than it: asking for it is an error
-//! that says so (`docs/backends.md`).
+//! default, with our own convolution kernels) or, in the GPU build (`--features vulkan`), `vulkan`
+//! (the best Vulkan adapter), `vulkan:N` (discrete GPU N) or `vulkan:cpu` (a Vulkan driver that runs
+//! on the CPU, such as Mesa's lavapipe: how the GPU code path is tested on machines without a GPU).
+//! `cuda` (burn's CUDA backend, whose build downloads LLVM) and `torch` (libtorch) were removed:
+//! asking for them is an error that says what to use instead (`docs/backends.md`).
 //!
 //! ```
 //! let cpu = equiarm_nn::device::parse("cpu").unwrap();
@@ -15,15 +16,18 @@
 //!
 //! Limitations: [`parse`] does not open the device; [`open`] and [`check`] do (one tiny
 //! operation), so a missing GPU or driver is reported before a run starts rather than as a panic
-//! inside it. CubeCL compiles its kernels at run time: the first steps on a GPU are slow. Results
-//! on a GPU are not bit-identical to the CPU's, and GPU runs are not promised to be bitwise
-//! repeatable. The CUDA path has not been run on a GPU yet.
+//! inside it. The GPU build compiles its kernels at run time (WGSL, then SPIR-V through naga): the
+//! first steps on a device are slow. Results on a GPU are not bit-identical to the CPU's, and GPU
+//! runs are not promised to be bitwise repeatable.
 
 use burn::tensor::{Device, Tensor};
 use thiserror::Error;
 
 /// The device names [`parse`] accepts, for help texts and errors.
-pub const CHOICES: &str = "`cpu` (the default) or `cuda` / `cuda:N` (CUDA device N)";
+pub const CHOICES: &str = "`cpu` (the default), or in the GPU build `vulkan`, `vulkan:N` (discrete GPU N) or `vulkan:cpu` (a CPU Vulkan driver)";
+
+/// The command that builds the GPU build (the `vulkan` feature), for messages.
+pub const GPU_BUILD: &str = "cargo build --release --features vulkan";
 
 /// A device name that cannot be used.
 #[derive(Clone, Debug, Error, PartialEq, Eq)]
@@ -34,17 +38,25 @@ pub enum DeviceError {
         /// The name given.
         name: String,
     },
-    /// `cuda:` followed by something that is not a device index.
-    #[error("device `{name}`: the CUDA device index must be a non-negative integer, e.g. `cuda:0`")]
+    /// `vulkan:` followed by something that is neither a device index nor `cpu`.
+    #[error("device `{name}`: after `vulkan:` give a non-negative integer (`vulkan:0`) or `cpu` (`vulkan:cpu`)")]
     BadIndex {
         /// The name given.
         name: String,
     },
-    /// A CUDA device was asked of a binary built without the `cuda` feature.
+    /// A Vulkan device was asked of a binary built without the `vulkan` feature.
     #[error(
-        "device `{name}`: this binary was built without the `cuda` feature: rebuild with `cargo build --release --features cuda`"
+        "device `{name}`: this binary was built without the GPU build's `vulkan` feature: rebuild with `{GPU_BUILD}`"
     )]
-    NoCuda {
+    NoVulkan {
+        /// The name given.
+        name: String,
+    },
+    /// The CUDA device, which equiarm no longer has.
+    #[error(
+        "device `{name}`: equiarm has no CUDA backend (burn's CUDA build downloads LLVM, so it cannot build offline): build the GPU build with `{GPU_BUILD}` and use `--device vulkan`, which runs on NVIDIA GPUs through their Vulkan driver (docs/backends.md)"
+    )]
+    CudaRemoved {
         /// The name given.
         name: String,
     },
@@ -72,27 +84,42 @@ pub fn cpu() -> Device {
     Device::flex()
 }
 
-/// True when this binary was built with the `cuda` feature.
-pub const fn cuda_enabled() -> bool {
-    cfg!(feature = "cuda")
+/// True when this binary is the GPU build (the `vulkan` feature).
+pub const fn vulkan_enabled() -> bool {
+    cfg!(feature = "vulkan")
 }
 
 /// The device named `name` (case-insensitive, surrounding blanks ignored): `cpu` (also `flex`,
-/// burn's name for it), `cuda` (device 0) or `cuda:N`. Returns the plain (non-autodiff) device;
-/// callers add autodiff where they train. `torch` (or `libtorch`) is refused with
-/// [`DeviceError::TorchRemoved`].
+/// burn's name for it), or in the GPU build `vulkan` (the adapter wgpu prefers), `vulkan:N`
+/// (discrete GPU N) or `vulkan:cpu` (a CPU adapter, e.g. lavapipe). Returns the plain
+/// (non-autodiff) device; callers add autodiff where they train. `cuda[:N]` and `torch` are refused
+/// with [`DeviceError::CudaRemoved`] and [`DeviceError::TorchRemoved`].
 pub fn parse(name: &str) -> Result<Device, DeviceError> {
+    let given = || name.to_string();
     match choice(name)? {
         Choice::Cpu => Ok(cpu()),
-        Choice::Cuda(index) => cuda(index).ok_or_else(|| DeviceError::NoCuda { name: name.to_string() }),
-        Choice::Torch => Err(DeviceError::TorchRemoved { name: name.to_string() }),
+        Choice::Vulkan(adapter) => vulkan(adapter).ok_or_else(|| DeviceError::NoVulkan { name: given() }),
+        Choice::Cuda => Err(DeviceError::CudaRemoved { name: given() }),
+        Choice::Torch => Err(DeviceError::TorchRemoved { name: given() }),
     }
+}
+
+/// Which Vulkan adapter a name asks for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Adapter {
+    /// The one wgpu prefers (a high-power GPU first).
+    Default,
+    /// Discrete GPU N.
+    Discrete(usize),
+    /// A driver that runs on the CPU (lavapipe).
+    Cpu,
 }
 
 /// A device name, understood.
 enum Choice {
     Cpu,
-    Cuda(usize),
+    Vulkan(Adapter),
+    Cuda,
     Torch,
 }
 
@@ -101,38 +128,61 @@ fn choice(name: &str) -> Result<Choice, DeviceError> {
     let lower = name.trim().to_ascii_lowercase();
     match lower.as_str() {
         "cpu" | "flex" => Ok(Choice::Cpu),
-        "cuda" => Ok(Choice::Cuda(0)),
+        "vulkan" => Ok(Choice::Vulkan(Adapter::Default)),
+        "vulkan:cpu" => Ok(Choice::Vulkan(Adapter::Cpu)),
         "torch" | "libtorch" => Ok(Choice::Torch),
-        other => match other.strip_prefix("cuda:") {
-            Some(n) if !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()) => {
-                n.parse().map(Choice::Cuda).map_err(|_| DeviceError::BadIndex { name: given() })
-            }
+        "cuda" => Ok(Choice::Cuda),
+        other if other.starts_with("cuda:") => Ok(Choice::Cuda),
+        other => match other.strip_prefix("vulkan:") {
+            Some(n) if !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()) => n
+                .parse()
+                .map(|i| Choice::Vulkan(Adapter::Discrete(i)))
+                .map_err(|_| DeviceError::BadIndex { name: given() }),
             Some(_) => Err(DeviceError::BadIndex { name: given() }),
             None => Err(DeviceError::Unknown { name: given() }),
         },
     }
 }
 
-#[cfg(feature = "cuda")]
-fn cuda(index: usize) -> Option<Device> {
-    Some(Device::cuda(index))
+#[cfg(feature = "vulkan")]
+fn vulkan(adapter: Adapter) -> Option<Device> {
+    use burn::backend::{WgpuBackend, WgpuDevice, WgpuDeviceKind};
+    let kind = match adapter {
+        Adapter::Default => WgpuDeviceKind::DefaultDevice,
+        Adapter::Discrete(i) => WgpuDeviceKind::DiscreteGpu(i),
+        Adapter::Cpu => WgpuDeviceKind::Cpu,
+    };
+    // Pinned to Vulkan: the device comes up there or not at all (not on OpenGL instead).
+    Some(Device::new(WgpuDevice::new(kind).on(WgpuBackend::Vulkan)))
 }
 
-#[cfg(not(feature = "cuda"))]
-fn cuda(_index: usize) -> Option<Device> {
+#[cfg(not(feature = "vulkan"))]
+fn vulkan(_adapter: Adapter) -> Option<Device> {
     None
 }
 
-/// The CUDA devices the driver reports (none without a driver); asking does not panic, unlike
-/// opening a device that is not there.
-#[cfg(feature = "cuda")]
-fn cuda_devices() -> Vec<Device> {
-    Device::enumerate(burn::tensor::DeviceType::Cuda).into_vec()
+/// Whether wgpu finds any adapter at all (no Vulkan loader or no driver: none). Asking does not
+/// panic, unlike opening a device that is not there.
+#[cfg(feature = "vulkan")]
+fn any_adapter() -> bool {
+    !Device::enumerate(burn::tensor::DeviceType::Wgpu).into_vec().is_empty()
 }
 
-#[cfg(not(feature = "cuda"))]
-fn cuda_devices() -> Vec<Device> {
-    Vec::new()
+#[cfg(not(feature = "vulkan"))]
+fn any_adapter() -> bool {
+    false
+}
+
+/// What `device` is, in words, for logs and reports: on a Vulkan device the adapter's own name and
+/// what its kernels are compiled for (opens the device), else burn's name for it.
+pub fn describe(device: &Device) -> String {
+    #[cfg(feature = "vulkan")]
+    if device.clone().without_autodiff() != cpu()
+        && let Some(id) = device.identity()
+    {
+        return format!("{} ({}; {device:?})", id.name, id.fingerprint);
+    }
+    format!("{device:?}")
 }
 
 /// Open `device` and run one tiny operation on it, so that a missing GPU or driver becomes an
@@ -161,21 +211,20 @@ pub fn check(device: &Device) -> Result<(), DeviceError> {
     }
 }
 
-/// [`parse`], then (for a CUDA device) ask the driver whether that device exists, then [`check`]:
-/// the device named `name`, known to work.
+/// [`parse`], then (for a Vulkan device) ask whether wgpu finds any adapter, then [`check`]: the
+/// device named `name`, known to work.
 pub fn open(name: &str) -> Result<Device, DeviceError> {
     let device = parse(name)?;
-    if let Choice::Cuda(index) = choice(name)? {
-        let found = cuda_devices();
-        if !found.contains(&device) {
-            let message = match found.len() {
-                0 => "no CUDA device found (no NVIDIA driver, or no GPU visible to this process)".to_string(),
-                n => format!("CUDA device {index} does not exist: this machine has {n} (cuda:0 to cuda:{})", n - 1),
-            };
-            return Err(DeviceError::Unusable { device: name.trim().to_string(), message });
-        }
+    if let Choice::Vulkan(_) = choice(name)?
+        && !any_adapter()
+    {
+        let message = "no Vulkan adapter found: no Vulkan loader (libvulkan.so.1) or no driver (an NVIDIA driver with its Vulkan ICD, or Mesa's lavapipe for `vulkan:cpu`); `vulkaninfo --summary` lists what this machine has".to_string();
+        return Err(DeviceError::Unusable { device: name.trim().to_string(), message });
     }
-    check(&device)?;
+    check(&device).map_err(|e| match e {
+        DeviceError::Unusable { message, .. } => DeviceError::Unusable { device: name.trim().to_string(), message },
+        e => e,
+    })?;
     Ok(device)
 }
 
@@ -196,14 +245,16 @@ mod tests {
     }
 
     #[test]
-    fn opening_a_cuda_device_never_panics() {
+    fn opening_a_vulkan_device_never_panics() {
         // Without the feature: the rebuild hint. With it: the device, or an error saying it is not
-        // there (this machine may have no GPU or no driver).
-        for name in ["cuda", "cuda:7"] {
+        // there (this machine may have no GPU or no Vulkan driver).
+        for name in ["vulkan", "vulkan:7", "vulkan:cpu"] {
             match open(name) {
-                Ok(d) => assert!(cuda_enabled() && d == parse(name).unwrap()),
-                Err(DeviceError::NoCuda { .. }) => assert!(!cuda_enabled()),
-                Err(e @ DeviceError::Unusable { .. }) => assert!(cuda_enabled() && e.to_string().contains(name), "{e}"),
+                Ok(d) => assert!(vulkan_enabled() && d == parse(name).unwrap()),
+                Err(DeviceError::NoVulkan { .. }) => assert!(!vulkan_enabled()),
+                Err(e @ DeviceError::Unusable { .. }) => {
+                    assert!(vulkan_enabled() && e.to_string().contains(name), "{e}")
+                }
                 Err(e) => panic!("{name}: {e}"),
             }
         }
@@ -219,46 +270,65 @@ mod tests {
     }
 
     #[test]
-    fn unknown_names_list_the_choices() {
-        for name in ["", "gpu", "tpu", "cudaa", "cpu:0", "wgpu", "torch:0"] {
-            let e = parse(name).unwrap_err();
-            assert_eq!(e, DeviceError::Unknown { name: name.into() });
+    fn the_removed_cuda_device_points_to_the_gpu_build() {
+        for name in ["cuda", "CUDA", "cuda:0", "cuda:3", "cuda:x"] {
+            let e = open(name).unwrap_err();
+            assert_eq!(e, DeviceError::CudaRemoved { name: name.into() });
             let text = e.to_string();
-            assert!(text.contains("`cpu`") && text.contains("`cuda:N`"), "{text}");
+            assert!(text.contains(GPU_BUILD) && text.contains("--device vulkan"), "{text}");
         }
     }
 
     #[test]
-    fn bad_cuda_indices_are_errors() {
-        for name in ["cuda:", "cuda:-1", "cuda:x", "cuda:1.5", "cuda:+1", "cuda:99999999999999999999999"] {
+    fn unknown_names_list_the_choices() {
+        for name in ["", "gpu", "tpu", "cudaa", "cpu:0", "wgpu", "torch:0", "vulkan0", "vk"] {
+            let e = parse(name).unwrap_err();
+            assert_eq!(e, DeviceError::Unknown { name: name.into() });
+            let text = e.to_string();
+            assert!(text.contains("`cpu`") && text.contains("`vulkan:N`"), "{text}");
+        }
+    }
+
+    #[test]
+    fn bad_vulkan_indices_are_errors() {
+        for name in [
+            "vulkan:",
+            "vulkan:-1",
+            "vulkan:x",
+            "vulkan:1.5",
+            "vulkan:+1",
+            "vulkan:99999999999999999999999",
+            "vulkan:gpu",
+        ] {
             let e = parse(name).unwrap_err();
             assert_eq!(e, DeviceError::BadIndex { name: name.into() }, "{name}");
             assert!(e.to_string().contains("non-negative integer"), "{e}");
         }
     }
 
-    #[cfg(not(feature = "cuda"))]
+    #[cfg(not(feature = "vulkan"))]
     #[test]
-    fn cuda_without_the_feature_names_the_rebuild_command() {
-        assert!(!cuda_enabled());
-        for name in ["cuda", "CUDA", "cuda:0", "cuda:3"] {
+    fn vulkan_without_the_feature_names_the_rebuild_command() {
+        assert!(!vulkan_enabled());
+        for name in ["vulkan", "VULKAN", "vulkan:0", "vulkan:3", "vulkan:cpu"] {
             let e = parse(name).unwrap_err();
-            assert_eq!(e, DeviceError::NoCuda { name: name.into() });
-            assert!(
-                e.to_string()
-                    .contains("built without the `cuda` feature: rebuild with `cargo build --release --features cuda`"),
-                "{e}"
-            );
+            assert_eq!(e, DeviceError::NoVulkan { name: name.into() });
+            assert!(e.to_string().contains(&format!("rebuild with `{GPU_BUILD}`")), "{e}");
         }
     }
 
-    #[cfg(feature = "cuda")]
+    #[cfg(feature = "vulkan")]
     #[test]
-    fn cuda_names_give_cuda_devices() {
-        assert!(cuda_enabled());
-        assert_eq!(parse("cuda").unwrap(), Device::cuda(0));
-        assert_eq!(parse("cuda:0").unwrap(), Device::cuda(0));
-        assert_eq!(parse("CUDA:2").unwrap(), Device::cuda(2));
-        assert_ne!(parse("cuda:1").unwrap(), Device::cuda(0));
+    fn vulkan_names_give_distinct_vulkan_devices() {
+        assert!(vulkan_enabled());
+        let names = ["vulkan", "vulkan:0", "vulkan:1", "vulkan:cpu"];
+        let devices: Vec<Device> = names.iter().map(|n| parse(n).unwrap()).collect();
+        assert_eq!(parse("VULKAN:0").unwrap(), devices[1]);
+        for (i, a) in devices.iter().enumerate() {
+            assert_ne!(*a, cpu());
+            for b in &devices[i + 1..] {
+                assert_ne!(a, b);
+            }
+        }
     }
 }

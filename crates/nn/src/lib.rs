@@ -10,7 +10,7 @@
 //! - [`nets`]: the paper's networks (Equi / CNN / SEN SAC actor and critic, rotation nets).
 //! - [`checkpoint`]: safetensors save / load with readable names and architecture checks.
 //! - [`diagnostics`]: per-group-element equivariance error of a network.
-//! - [`device`]: the device by name (`cpu`, `cuda[:N]` with the `cuda` feature), checked before use.
+//! - [`device`]: the device by name (`cpu`; `vulkan[:N|:cpu]` in the GPU build, the `vulkan` feature), checked before use.
 //!
 //! Tensors are burn 0.22 tensors; the default backend is `flex` (pure Rust CPU):
 //!

@@ -63,7 +63,7 @@ pub enum RotestCommand {
     },
     /// Train and evaluate one network on one dataset: OUT/run.json and OUT/best.safetensors.
     #[command(
-        after_help = "Examples:\n  equiarm rotest train --data data/rotest/none --model equi --train-pairs 400 --seed 0 -o runs/none/equi/400/s0\n  equiarm rotest train --data data/rotest/none --model cnn --train-pairs 400 --img-trans 400 -o runs/none/cnn+trans/400/s0\n  equiarm rotest train --paper --device cuda --data data/rotest/none --model equi --train-pairs 1600 -o runs/paper/none/equi/1600/s0"
+        after_help = "Examples:\n  equiarm rotest train --data data/rotest/none --model equi --train-pairs 400 --seed 0 -o runs/none/equi/400/s0\n  equiarm rotest train --data data/rotest/none --model cnn --train-pairs 400 --img-trans 400 -o runs/none/cnn+trans/400/s0\n  equiarm rotest train --paper --device vulkan --data data/rotest/none --model equi --train-pairs 1600 -o runs/paper/none/equi/1600/s0"
     )]
     Train {
         /// Dataset directory (or its pairs.rotest file).
@@ -186,7 +186,7 @@ pub struct TrainOpts {
     /// At most this many epochs.
     #[arg(long, default_value_t = 1000)]
     pub max_epochs: usize,
-    /// Device: `cpu`, or `cuda` / `cuda:N` in a binary built with `--features cuda`.
+    /// Device: `cpu`, or `vulkan` / `vulkan:N` / `vulkan:cpu` in the GPU build (`--features vulkan`).
     #[arg(long, default_value = "cpu")]
     pub device: String,
 }

@@ -12,7 +12,7 @@
 //! then one `csv,` line per case and the peak RSS.
 //!
 //! `cargo bench -p equiarm_sac --bench update -- [--reps 5] [--config reduced16|paper|all]
-//!   [--model equi|cnn|sen|all] [--threads 1,2] [--no-peer] [--device cpu|cuda[:N]]`
+//!   [--model equi|cnn|sen|all] [--threads 1,2] [--no-peer] [--device cpu|vulkan[:N|:cpu]]`
 //! (the bench profile builds everything in release; `--profile dev` gives close figures from the
 //! test build's target directory). Threads: one rayon pool per thread count for our side,
 //! `torch.set_num_threads` for the peer.
@@ -21,8 +21,9 @@ use std::process::Command;
 use std::time::Instant;
 
 use clap::{Parser, ValueEnum};
-use equiarm_sac::agent::{ActMode, Agent, AgentConfig, Batch, ModelKind};
+use equiarm_sac::agent::{AgentConfig, ModelKind};
 use equiarm_sac::config::TrainConfig;
+use equiarm_sac::timing::{random_batch, time_update};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 enum Preset {
@@ -72,11 +73,6 @@ struct Args {
     bench: bool,
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(|a, b| a.total_cmp(b));
-    v[v.len() / 2]
-}
-
 fn peak_rss_mb() -> f64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
@@ -85,28 +81,6 @@ fn peak_rss_mb() -> f64 {
         })
         .map(|kb| kb / 1024.0)
         .unwrap_or(f64::NAN)
-}
-
-fn batch(b: usize, s: usize, seed: u64) -> Batch {
-    let mut rng = equiarm_sac::rng::stream(seed, 1);
-    let img = |n: usize, rng: &mut _| equiarm_sac::rng::normals(rng, n * 5 * s * s);
-    let obs = img(b, &mut rng);
-    let next_obs = img(b, &mut rng);
-    let action = equiarm_sac::rng::normals(&mut rng, b * 5).iter().map(|x| x.tanh()).collect();
-    Batch {
-        b,
-        s,
-        m: 1,
-        k: 1,
-        obs,
-        next_obs,
-        action,
-        reward: (0..b).map(|i| (i % 7 == 0) as u8 as f32).collect(),
-        mask: (0..b).map(|i| (i % 7 != 0) as u8 as f32).collect(),
-        expert: (0..b).map(|i| (i % 3 == 0) as u8 as f32).collect(),
-        weight: vec![1.0; b],
-        curl: None,
-    }
 }
 
 /// Single-thread sgemm GFLOP/s of the `gemm` crate on 1024³ (the best of 10, after a warm-up):
@@ -224,28 +198,16 @@ fn main() {
             let cfg = AgentConfig { model, hidden, input_size: s, ..AgentConfig::default() };
             for (&threads, pool) in args.threads.iter().zip(&pools) {
                 let (u, a, flops) = pool.install(|| {
-                    let mut agent = Agent::new_on(cfg.clone(), 0, &device).expect("agent");
-                    let data = batch(b, s, 3);
-                    let mut times = Vec::new();
+                    let data = random_batch(b, s, 3);
                     let mut flops = 0;
-                    for i in 0..=args.reps {
-                        let copy = data.clone();
-                        equiarm_nn::kernels::gemm_conv::reset_flop_count();
-                        let t = Instant::now();
-                        agent.update(copy).expect("update");
-                        if i > 0 {
-                            times.push(t.elapsed().as_secs_f64());
-                        }
+                    equiarm_nn::kernels::gemm_conv::reset_flop_count();
+                    let reps = args.reps as usize;
+                    let t = time_update(&cfg, &data, &device, 1, reps, (5 * reps).max(5), |_| {
                         flops = equiarm_nn::kernels::gemm_conv::flop_count();
-                    }
-                    let one = &data.obs[..5 * s * s];
-                    let mut acts = Vec::new();
-                    for _ in 0..(5 * args.reps).max(5) {
-                        let t = Instant::now();
-                        agent.act(one, 1, ActMode::Greedy, None).expect("act");
-                        acts.push(t.elapsed().as_secs_f64());
-                    }
-                    (median(times), median(acts), flops)
+                        equiarm_nn::kernels::gemm_conv::reset_flop_count();
+                    })
+                    .expect("update");
+                    (t.update_median(), t.act_median(), flops)
                 });
                 let p = if args.no_peer || args.hidden.is_some() || args.batch.is_some() || model == ModelKind::Sen {
                     None

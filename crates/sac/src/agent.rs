@@ -15,7 +15,7 @@
 //! Noise comes from the agent's own seeded RNG, so updates are bitwise repeatable on one machine.
 //!
 //! Device: [`Agent::new`] builds on the CPU (`flex`); [`Agent::new_on`] on any device of
-//! [`equiarm_nn::device`] (e.g. a CUDA GPU with the `cuda` feature). Everything the agent makes
+//! [`equiarm_nn::device`] (e.g. a GPU through Vulkan in the GPU build, the `vulkan` feature). Everything the agent makes
 //! lives there: weights, inputs, noise, Adam moments, loaded checkpoints. Noise is drawn on the
 //! host from the same RNG on every device, and checkpoints load across devices.
 //!

@@ -8,11 +8,10 @@
 //! - [`optim`]: Adam and Polyak keyed by parameter path (checkpoints load across processes).
 //! - [`rng`], [`schedule`]: seeded ChaCha streams saved in checkpoints; linear and cosine schedules.
 //! - [`tensorfile`]: safetensors files of named f32 tensors (optimiser state).
+//! - [`timing`]: how long an update and an action take on a device (benchmarks, `equiarm device-check`).
 //!
 //! The training run around it (the in-process loop, demos, evaluation, run directories, metrics,
 //! plots) is `equiarm_train`; the simulator is not a dependency of the learner.
-//!
-//! Limitations: FERM (CURL) is not implemented yet.
 
 pub mod agent;
 pub mod augment;
@@ -24,3 +23,4 @@ pub mod replay;
 pub mod rng;
 pub mod schedule;
 pub mod tensorfile;
+pub mod timing;

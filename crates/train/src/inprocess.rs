@@ -83,7 +83,7 @@ pub struct RunOptions {
 
 impl Default for RunOptions {
     fn default() -> Self {
-        // Not `Device::default()`: that is the GPU in a build with the `cuda` feature.
+        // Not `Device::default()`: that may be the GPU in the GPU build (`vulkan` feature).
         RunOptions {
             run_dir: PathBuf::new(),
             resume: None,

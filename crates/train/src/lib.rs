@@ -8,6 +8,8 @@
 //! - [`config`]: the config checks that need the simulator.
 //! - [`metrics`], [`plot`], [`progress`]: CleanRL-style scalar logs, the learning-curve PNG and
 //!   the progress line.
+//! - [`device_check`]: `equiarm device-check`, update and action times on a device beside the CPU's,
+//!   and a short run there.
 //!
 //! The nodes' logic, without DDS (the nodes in `equiarm_nodes` are adapters around it):
 //! - [`trainer`], [`ingest`], [`lockstep`]: the trainer node's decisions, its intake of transitions and episode results, and
@@ -24,6 +26,7 @@ use thiserror::Error;
 
 pub mod bag_report;
 pub mod config;
+pub mod device_check;
 pub mod env;
 pub mod evaluation;
 pub mod gate;
