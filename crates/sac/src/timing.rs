@@ -122,7 +122,7 @@ mod tests {
 
     #[test]
     fn a_timed_update_counts_warmups_apart() {
-        let cfg = AgentConfig { model: ModelKind::Cnn, hidden: 4, input_size: 16, ..AgentConfig::default() };
+        let cfg = AgentConfig { model: ModelKind::Cnn, hidden: 8, input_size: 16, ..AgentConfig::default() };
         let batch = random_batch(4, 16, 1);
         let mut calls = Vec::new();
         let t = time_update(&cfg, &batch, &equiarm_nn::device::cpu(), 2, 3, 4, |i| calls.push(i)).unwrap();
