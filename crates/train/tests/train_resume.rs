@@ -6,6 +6,8 @@
 //! actions; resuming replays those actions in the deterministic simulator. If any piece were
 //! missing or inexact, the resumed run's weights would differ from the straight run's.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use equiarm_sac::config::TrainConfig;
@@ -13,19 +15,7 @@ use equiarm_train::inprocess::{RunOptions, run};
 use equiarm_train::rundir::find_checkpoint;
 
 fn tiny() -> TrainConfig {
-    let mut c = TrainConfig::reduced("block_pulling");
-    c.image_size = 19;
-    c.agent.input_size = 16;
-    c.agent.hidden = 8;
-    c.num_envs = 2;
-    c.demo_episodes = 2;
-    c.batch_size = 8;
-    c.training_starts = 30;
-    c.total_updates = 12;
-    c.eval_every = 0;
-    c.checkpoint_every = 0;
-    c.seed = 11;
-    c
+    common::tiny_run(11, 12)
 }
 
 fn scratch(name: &str) -> PathBuf {

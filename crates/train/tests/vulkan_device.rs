@@ -10,11 +10,12 @@
 //! - device names: the adapter is described, a missing one is an error, not a panic.
 #![cfg(feature = "vulkan")]
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use equiarm_nn::burn::tensor::Device;
 use equiarm_sac::agent::{Agent, AgentConfig, Metrics, ModelKind};
-use equiarm_sac::config::TrainConfig;
 use equiarm_sac::timing::random_batch;
 use equiarm_train::inprocess::{RunOptions, run};
 use equiarm_train::rundir::find_checkpoint;
@@ -125,19 +126,10 @@ fn a_paper_size_equi_actor_is_equivariant_on_the_device() {
 
 #[test]
 fn a_short_run_on_the_device_resumes_on_the_cpu() {
-    let mut c = TrainConfig::reduced("block_pulling");
-    c.image_size = 19;
-    c.agent.input_size = 16;
-    c.agent.hidden = 8;
-    c.num_envs = 2;
-    c.demo_episodes = 2;
-    c.batch_size = 8;
-    c.training_starts = 30;
-    c.total_updates = 8;
+    let mut c = common::tiny_run(2, 8);
     c.eval_every = 4;
     c.eval_episodes = 1;
     c.checkpoint_every = 4;
-    c.seed = 2;
     let never = || false;
     let dir = scratch("run");
     let on_device = RunOptions { run_dir: dir.clone(), stop_at: Some(4), device: device(), ..Default::default() };
