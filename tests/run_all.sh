@@ -42,10 +42,7 @@ echo "== Python tests"
 export EQUIARM_BIN="$CARGO_TARGET_DIR/debug/equiarm"
 "${ns[@]}" bash -c "$netup; cd tests/python && exec \"\$EQUIARM_PYTHON\" -m pytest -q"
 echo "== GPU build: its device tests on Mesa's lavapipe, a Vulkan driver on the CPU (docs/backends.md)"
-# A build of its own in the `gpu-test` profile (Cargo.toml: dependencies at opt-level 1, no debug
-# info), since the feature changes what the CPU build's crates are compiled with, so nothing of the
-# dev build is reused: cold, 27 min on 2 cores against over 40 min in the dev profile; its tests do
-# little on the CPU.
+# A build of its own in the `gpu-test` profile (why and what it costs: docs/backends.md).
 source tests/vulkan_env.sh
 VK_ICD_FILENAMES="$EQUIARM_LAVAPIPE_ICD" cargo test --locked --workspace --profile gpu-test --features equiarm_train/vulkan --test vulkan_device
 echo "== all tests passed in $(( $(date +%s) - start )) s"
