@@ -12,16 +12,23 @@ export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/equiarm/target}"
 export CARGO_TERM_COLOR=never
 
 source tests/python_env.sh
+# The GPU build's device tests run on Mesa's lavapipe, a Vulkan driver on the CPU (docs/backends.md).
+source tests/vulkan_env.sh
+
+# Everything is built once, as the GPU build (`--features vulkan`): it holds the CPU build whole
+# (the CPU stays the default device), and a second build for the device tests alone would
+# recompile burn with other features (docs/backends.md, "Tested without a GPU").
+features=(--features vulkan)
 
 echo "== style gates"
 # formatting (rustfmt.toml), lints with every warning an error (missing_docs included: the workspace
 # warns on it), and the API docs of every crate without a broken link; each names the file and line.
 cargo fmt --all --check
-cargo clippy --locked --workspace --all-targets --quiet -- -D warnings
-RUSTDOCFLAGS="-D warnings" cargo doc --locked --workspace --no-deps --quiet
+cargo clippy --locked --workspace --all-targets "${features[@]}" --quiet -- -D warnings
+RUSTDOCFLAGS="-D warnings" cargo doc --locked --workspace "${features[@]}" --no-deps --quiet
 echo "== build (target dir: $CARGO_TARGET_DIR)"
-cargo build --locked --workspace --all-targets
-cargo test --locked --workspace --no-run
+cargo build --locked --workspace --all-targets "${features[@]}"
+cargo test --locked --workspace "${features[@]}" --no-run
 
 # A private network namespace: as root (CI) or through an unprivileged user namespace.
 ns=()
@@ -34,15 +41,11 @@ else
 fi
 netup='if command -v ip >/dev/null; then ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo 2>/dev/null || true; fi'
 
-echo "== Rust tests"
-"${ns[@]}" bash -c "$netup; exec cargo test --locked --offline --workspace"
+echo "== Rust tests (the device tests, crates/train/tests/vulkan_device.rs, on lavapipe: \`vulkan:cpu\`)"
+"${ns[@]}" env VK_ICD_FILENAMES="$EQUIARM_LAVAPIPE_ICD" bash -c "$netup; exec cargo test --locked --offline --workspace ${features[*]}"
 echo "== fuzz: 10^4 inputs per target (docs/fuzzing.md)" && "$CARGO_TARGET_DIR/debug/equiarm_fuzz" all --execs 10000
 echo "== Python tests"
 # The launch-script examples drive real nodes over DDS: same private namespace, our binary.
 export EQUIARM_BIN="$CARGO_TARGET_DIR/debug/equiarm"
 "${ns[@]}" bash -c "$netup; cd tests/python && exec \"\$EQUIARM_PYTHON\" -m pytest -q"
-echo "== GPU build: its device tests on Mesa's lavapipe, a Vulkan driver on the CPU (docs/backends.md)"
-# A build of its own in the `gpu-test` profile (why and what it costs: docs/backends.md).
-source tests/vulkan_env.sh
-VK_ICD_FILENAMES="$EQUIARM_LAVAPIPE_ICD" cargo test --locked --workspace --profile gpu-test --features equiarm_train/vulkan --test vulkan_device
 echo "== all tests passed in $(( $(date +%s) - start )) s"

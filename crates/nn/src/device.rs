@@ -306,6 +306,15 @@ mod tests {
         }
     }
 
+    #[test]
+    fn the_no_vulkan_error_names_the_device_and_the_rebuild_command() {
+        let e = DeviceError::NoVulkan { name: "vulkan:3".into() }.to_string();
+        assert!(e.starts_with("device `vulkan:3`: "), "{e}");
+        assert!(e.contains(&format!("rebuild with `{GPU_BUILD}`")), "{e}");
+        assert!(GPU_BUILD.contains("--features vulkan"), "{GPU_BUILD}");
+    }
+
+    // The test command builds the GPU build, so this one runs in default-feature builds only.
     #[cfg(not(feature = "vulkan"))]
     #[test]
     fn vulkan_without_the_feature_names_the_rebuild_command() {
