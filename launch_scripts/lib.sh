@@ -30,7 +30,8 @@ eqa_default_signals() {
 eqa_log() { printf '[%s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
 
 # EQUIARM_BIN when set (nothing is built); else `cargo build` of the dev profile (dependencies and the
-# hot crates optimised, as the tests build it) into CARGO_TARGET_DIR (default ~/.cache/equiarm/target).
+# hot crates optimised; the test command builds the same profile with the GPU build's `vulkan`
+# feature on as well) into CARGO_TARGET_DIR (default ~/.cache/equiarm/target).
 eqa_bin() {
   if [ -n "${EQUIARM_BIN:-}" ]; then
     [ -x "$EQUIARM_BIN" ] || command -v "$EQUIARM_BIN" >/dev/null \

@@ -8,6 +8,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 start=$(date +%s)
+# A step's header, with the seconds since the start (where a cold run spends its time).
+step() { echo "== [$(( $(date +%s) - start )) s] $*"; }
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/equiarm/target}"
 export CARGO_TERM_COLOR=never
 
@@ -20,14 +22,16 @@ source tests/vulkan_env.sh
 # recompile burn with other features (docs/backends.md, "Tested without a GPU").
 features=(--features vulkan)
 
-echo "== style gates"
+step "style gates"
 # formatting (rustfmt.toml), lints with every warning an error (missing_docs included: the workspace
 # warns on it), and the API docs of every crate without a broken link; each names the file and line.
 cargo fmt --all --check
 cargo clippy --locked --workspace --all-targets "${features[@]}" --quiet -- -D warnings
 RUSTDOCFLAGS="-D warnings" cargo doc --locked --workspace "${features[@]}" --no-deps --quiet
-echo "== build (target dir: $CARGO_TARGET_DIR)"
-cargo build --locked --workspace --all-targets "${features[@]}"
+step "build (target dir: $CARGO_TARGET_DIR)"
+# The programs and every test target (examples included); the benchmarks are linted by clippy above
+# and built when run (docs/benchmarks.md).
+cargo build --locked --workspace --bins "${features[@]}"
 cargo test --locked --workspace "${features[@]}" --no-run
 
 # A private network namespace: as root (CI) or through an unprivileged user namespace.
@@ -41,11 +45,12 @@ else
 fi
 netup='if command -v ip >/dev/null; then ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo 2>/dev/null || true; fi'
 
-echo "== Rust tests (the device tests, crates/train/tests/vulkan_device.rs, on lavapipe: \`vulkan:cpu\`)"
+step "Rust tests (the device tests, crates/train/tests/vulkan_device.rs, on lavapipe: \`vulkan:cpu\`)"
 "${ns[@]}" env VK_ICD_FILENAMES="$EQUIARM_LAVAPIPE_ICD" bash -c "$netup; exec cargo test --locked --offline --workspace ${features[*]}"
-echo "== fuzz: 10^4 inputs per target (docs/fuzzing.md)" && "$CARGO_TARGET_DIR/debug/equiarm_fuzz" all --execs 10000
-echo "== Python tests"
+step "fuzz: 10^4 inputs per target, one target per core (docs/fuzzing.md)"
+"$CARGO_TARGET_DIR/debug/equiarm_fuzz" all --execs 10000
+step "Python tests"
 # The launch-script examples drive real nodes over DDS: same private namespace, our binary.
 export EQUIARM_BIN="$CARGO_TARGET_DIR/debug/equiarm"
 "${ns[@]}" bash -c "$netup; cd tests/python && exec \"\$EQUIARM_PYTHON\" -m pytest -q"
-echo "== all tests passed in $(( $(date +%s) - start )) s"
+step "all tests passed"

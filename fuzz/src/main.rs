@@ -1,5 +1,6 @@
-//! `equiarm_fuzz TARGET --execs N [--seed S]`: fuzz one target (or `all`), print executions, time
-//! and crashes per target; exit 1 if any input failed. `list` names the targets.
+//! `equiarm_fuzz TARGET --execs N [--seed S] [--jobs J]`: fuzz one target (or `all`, J targets at a
+//! time), print executions, time and crashes per target; exit 1 if any input failed. `list` names
+//! the targets.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -30,6 +31,10 @@ struct Args {
     /// record holds it (docs/fuzzing.md, "Limitations").
     #[arg(long, default_value_t = 8192)]
     memory_mb: u64,
+    /// Targets fuzzed at a time, each in its own worker process (default: the number of cores).
+    /// The inputs do not depend on it; the table keeps the targets' order.
+    #[arg(long)]
+    jobs: Option<usize>,
     /// Where failing inputs are written (default: the `crashes` folder of this crate).
     #[arg(long)]
     crash_dir: Option<PathBuf>,
@@ -108,29 +113,63 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    let jobs = match args.jobs {
+        Some(0) => {
+            eprintln!("--jobs 0: give at least 1");
+            return ExitCode::from(2);
+        }
+        Some(j) => j,
+        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
+    }
+    .min(chosen.len());
     println!("{:<24} {:>10} {:>10} {:>9} {:>10} {:>7}", "target", "execs", "accepted", "time_s", "execs/s", "crashes");
     let mut failed = 0;
     let mut broken = 0;
-    for t in &chosen {
-        match runner::run_target(t, &opts, &exe) {
-            Ok(o) => {
-                println!(
-                    "{:<24} {:>10} {:>10} {:>9.1} {:>10.0} {:>7}",
-                    o.target,
-                    o.execs,
-                    o.accepted,
-                    o.secs,
-                    o.execs as f64 / o.secs.max(1e-9),
-                    o.failures.len()
-                );
-                failed += o.failures.len();
-            }
-            Err(e) => {
-                println!("ERROR {e}");
-                broken += 1;
+    // `jobs` threads take the targets in order; each row is printed once the rows before it are.
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let (send, recv) = std::sync::mpsc::channel();
+    std::thread::scope(|scope| {
+        for _ in 0..jobs {
+            let send = send.clone();
+            let (next, chosen, opts, exe) = (&next, &chosen, &opts, &exe);
+            scope.spawn(move || {
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    let Some(t) = chosen.get(i) else { break };
+                    if send.send((i, runner::run_target(t, opts, exe))).is_err() {
+                        break;
+                    }
+                }
+            });
+        }
+        drop(send);
+        let mut done: Vec<Option<Result<runner::Outcome, runner::RunError>>> = chosen.iter().map(|_| None).collect();
+        let mut printed = 0;
+        for (i, result) in recv {
+            done[i] = Some(result);
+            while let Some(result) = done.get_mut(printed).and_then(Option::take) {
+                match result {
+                    Ok(o) => {
+                        println!(
+                            "{:<24} {:>10} {:>10} {:>9.1} {:>10.0} {:>7}",
+                            o.target,
+                            o.execs,
+                            o.accepted,
+                            o.secs,
+                            o.execs as f64 / o.secs.max(1e-9),
+                            o.failures.len()
+                        );
+                        failed += o.failures.len();
+                    }
+                    Err(e) => {
+                        println!("ERROR {e}");
+                        broken += 1;
+                    }
+                }
+                printed += 1;
             }
         }
-    }
+    });
     if failed > 0 || broken > 0 {
         println!("{failed} failing inputs, {broken} targets that could not run");
         ExitCode::FAILURE

@@ -44,3 +44,28 @@ fn a_clean_run_exits_zero_with_its_figures() {
     let accepted: u64 = row[2].parse().unwrap();
     assert!((8..3000).contains(&accepted), "the seeds pass and most mutants are refused: {accepted}");
 }
+
+#[test]
+fn targets_run_in_parallel_give_the_same_table_in_the_same_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let crashes = dir.path().to_str().unwrap();
+    let rows = |jobs: &str| {
+        let (ok, out) = fuzz(&["all", "--execs", "20", "--jobs", jobs, "--crash-dir", crashes]);
+        assert!(ok, "--jobs {jobs}:\n{out}");
+        // name, execs, accepted, crashes: everything but the times
+        out.lines()
+            .skip(1)
+            .map(|l| {
+                let f: Vec<&str> = l.split_whitespace().collect();
+                assert_eq!(f.len(), 6, "a table row: {l}");
+                format!("{} {} {} {}", f[0], f[1], f[2], f[5])
+            })
+            .collect::<Vec<_>>()
+    };
+    let (one, three) = (rows("1"), rows("3"));
+    let names: Vec<&str> = one.iter().map(|r| r.split(' ').next().unwrap()).collect();
+    assert!(names.len() > 3 && names.contains(&"bag_recover") && names.contains(&"cli_values"), "{names:?}");
+    assert_eq!(one, three, "the inputs and the table's order do not depend on --jobs");
+    let (ok, _) = fuzz(&["all", "--execs", "1", "--jobs", "0"]);
+    assert!(!ok, "--jobs 0 is refused");
+}
