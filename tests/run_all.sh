@@ -29,10 +29,10 @@ cargo fmt --all --check
 cargo clippy --locked --workspace --all-targets "${features[@]}" --quiet -- -D warnings
 RUSTDOCFLAGS="-D warnings" cargo doc --locked --workspace "${features[@]}" --no-deps --quiet
 step "build (target dir: $CARGO_TARGET_DIR)"
-# The programs and every test target (examples included); the benchmarks are linted by clippy above
-# and built when run (docs/benchmarks.md).
-cargo build --locked --workspace --bins "${features[@]}"
+# Every test target (examples included) in one go, then the programs (mostly built by then); the
+# benchmarks are linted by clippy above and built when run (docs/benchmarks.md).
 cargo test --locked --workspace "${features[@]}" --no-run
+cargo build --locked --workspace --bins "${features[@]}"
 
 # A private network namespace: as root (CI) or through an unprivileged user namespace.
 ns=()

@@ -8,7 +8,9 @@ _icd=""
 for _f in /usr/share/vulkan/icd.d/lvp_icd.x86_64.json /usr/share/vulkan/icd.d/lvp_icd.*.json; do
   if [ -f "$_f" ]; then _icd="$_f"; break; fi
 done
-if [ -z "$_icd" ] || ! ldconfig -p 2>/dev/null | grep -q 'libvulkan\.so\.1 '; then
+# (grep reads all of ldconfig's output: with `-q` it could stop early, ldconfig would die of SIGPIPE,
+# and under `set -o pipefail` a present loader would look missing.)
+if [ -z "$_icd" ] || ! ldconfig -p 2>/dev/null | grep 'libvulkan\.so\.1 ' >/dev/null; then
   echo "equiarm: installing the Vulkan loader and Mesa's lavapipe (libvulkan1, mesa-vulkan-drivers) for the GPU build's tests" >&2
   _sudo=()
   if [ "$(id -u)" != 0 ]; then _sudo=(sudo -n); fi
