@@ -17,9 +17,7 @@ source tests/python_env.sh
 # The GPU build's device tests run on Mesa's lavapipe, a Vulkan driver on the CPU (docs/backends.md).
 source tests/vulkan_env.sh
 
-# Everything is built once, as the GPU build (`--features vulkan`): it holds the CPU build whole
-# (the CPU stays the default device), and a second build for the device tests alone would
-# recompile burn with other features (docs/backends.md, "Tested without a GPU").
+# Everything is built once, as the GPU build (why and what it costs: docs/backends.md).
 features=(--features vulkan)
 
 step "style gates"
