@@ -53,7 +53,7 @@ done
 mkdir -p "$out"
 
 # The Vulkan loader: the machine's, else the one carried along.
-if ! ldconfig -p 2>/dev/null | grep -q 'libvulkan\.so\.1 '; then
+if ! ldconfig -p 2>/dev/null | grep 'libvulkan\.so\.1 ' >/dev/null; then  # not -q: see tests/vulkan_env.sh
   export LD_LIBRARY_PATH="$here/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 fi
 # The NVIDIA Vulkan driver's manifest, where containers mount it when the loader does not look.

@@ -64,7 +64,7 @@ probe="eqa-probe-$$"
 ip netns add "$probe" 2>/dev/null || skip "cannot create a network namespace here ('ip netns add' failed)"
 ip netns del "$probe"
 
-ns_exists() { ip netns list | awk '{print $1}' | grep -qx "$1"; }
+ns_exists() { ip netns list | awk '{print $1}' | grep -x "$1" >/dev/null; }  # not -q: an early exit could SIGPIPE awk under pipefail
 
 delete_namespaces() {
   local ns pid
