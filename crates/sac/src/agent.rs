@@ -280,12 +280,17 @@ pub struct Metrics {
     pub alpha_loss: f32,
     /// `losses/entropy`: −mean log π of the actor's samples.
     pub entropy: f32,
+    /// `losses/curl_loss`: FERM's contrastive loss of this update's step (`None` for the other models).
+    pub curl_loss: Option<f32>,
+    /// `losses/curl_pretrain_loss`: FERM's mean contrastive loss over the last 100 pre-training
+    /// steps, on the update that ran the pre-training ([`crate::learner::Learner::update`]), else `None`.
+    pub curl_pretrain_loss: Option<f32>,
 }
 
 impl Metrics {
-    /// `(name, value)` pairs with CleanRL's names.
-    pub fn named(&self) -> [(&'static str, f64); 8] {
-        [
+    /// `(name, value)` pairs with CleanRL's names (FERM's contrastive losses where present).
+    pub fn named(&self) -> Vec<(&'static str, f64)> {
+        let mut named = vec![
             ("losses/qf1_loss", self.qf1_loss as f64),
             ("losses/qf2_loss", self.qf2_loss as f64),
             ("losses/qf1_values", self.qf1_values as f64),
@@ -294,7 +299,10 @@ impl Metrics {
             ("losses/alpha", self.alpha as f64),
             ("losses/alpha_loss", self.alpha_loss as f64),
             ("losses/entropy", self.entropy as f64),
-        ]
+        ];
+        named.extend(self.curl_loss.map(|v| ("losses/curl_loss", v as f64)));
+        named.extend(self.curl_pretrain_loss.map(|v| ("losses/curl_pretrain_loss", v as f64)));
+        named
     }
 }
 
@@ -699,12 +707,14 @@ impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
         self.updates += 1;
 
         // --- FERM: one contrastive step on the batch's anchor and positive crops.
-        if self.curl.is_some() {
+        let curl_loss = if self.curl.is_some() {
             let Some((anchor, positive)) = batch.curl.take() else {
                 return Err(AgentError::Batch("FERM needs the batch's contrastive crops (Batch::curl)".into()));
             };
-            self.curl_step(anchor, positive, b)?;
-        }
+            Some(self.curl_step(anchor, positive, b)?)
+        } else {
+            None
+        };
 
         let metrics = Metrics {
             qf1_loss,
@@ -715,6 +725,8 @@ impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
             alpha: self.log_alpha.exp() as f32,
             alpha_loss: alpha_loss as f32,
             entropy: -mean_logp as f32,
+            curl_loss,
+            curl_pretrain_loss: None,
         };
         for (what, v) in [("critic loss", qf1_loss + qf2_loss), ("actor loss", actor_loss_v), ("alpha", metrics.alpha)]
         {

@@ -180,16 +180,15 @@ impl Learner {
     /// Sample a batch, crop it, update the agent and the priorities. FERM's first call first makes
     /// the contrastive pre-training ([`Learner::curl_pretrain`]).
     pub fn update(&mut self) -> Result<Metrics, LearnerError> {
-        if self.agent.needs_curl_pretraining() {
-            self.curl_pretrain()?;
-        }
+        let pretrain = if self.agent.needs_curl_pretraining() { Some(self.curl_pretrain()?) } else { None };
         let beta = self.beta.value(self.agent.updates());
         if let Some(lr) = &self.lr {
             self.agent.set_lr(lr.value(self.agent.updates()));
         }
         let sample = self.replay.sample(self.cfg.batch_size, beta, &mut self.rng)?;
         let batch = self.build_batch(&sample.slots, &sample.weights)?;
-        let (metrics, td) = self.agent.update(batch)?;
+        let (mut metrics, td) = self.agent.update(batch)?;
+        metrics.curl_pretrain_loss = pretrain.as_deref().and_then(tail_mean);
         self.replay.update_priorities(&sample.slots, &td)?;
         self.last = Some(metrics);
         Ok(metrics)
@@ -198,7 +197,8 @@ impl Learner {
     /// FERM's contrastive pre-training (docs/paper.md §1.10): `agent.curl_pretrain_steps` contrastive
     /// steps on batches drawn uniformly (with replacement) from the replay's expert transitions (all
     /// transitions if it holds none), each with two independent random crops per observation.
-    pub fn curl_pretrain(&mut self) -> Result<(), LearnerError> {
+    /// Returns each step's contrastive loss and logs the mean of the first and of the last 100.
+    pub fn curl_pretrain(&mut self) -> Result<Vec<f32>, LearnerError> {
         use rand::Rng as _;
         let mut pool: Vec<usize> =
             (0..self.replay.len()).filter(|&i| self.replay.get(i).is_some_and(|t| t.expert)).collect();
@@ -210,14 +210,23 @@ impl Learner {
                 AgentError::Batch("FERM's contrastive pre-training needs transitions in the replay".into()).into()
             );
         }
+        let mut losses = Vec::with_capacity(self.cfg.agent.curl_pretrain_steps);
         for _ in 0..self.cfg.agent.curl_pretrain_steps {
             let slots: Vec<usize> =
                 (0..self.cfg.batch_size).map(|_| pool[self.rng.random_range(0..pool.len())]).collect();
             let (anchor, positive) = self.curl_crops(&slots)?;
-            self.agent.curl_step(anchor, positive, slots.len())?;
+            losses.push(self.agent.curl_step(anchor, positive, slots.len())?);
         }
         self.agent.set_curl_pretrained();
-        Ok(())
+        if let (Some(first), Some(last)) = (head_mean(&losses), tail_mean(&losses)) {
+            log::info!(
+                "FERM pre-training: {} contrastive steps on {} transitions, loss {first:.4} (mean of the first {n}) -> {last:.4} (mean of the last {n})",
+                losses.len(),
+                pool.len(),
+                n = losses.len().min(PRETRAIN_LOSS_WINDOW),
+            );
+        }
+        Ok(losses)
     }
 
     /// Two independent random crops of the obs of each of `slots` (FERM's anchor and positive).
@@ -437,4 +446,19 @@ pub fn first_difference(a: &serde_json::Value, b: &serde_json::Value, prefix: &s
         }
         _ => prefix.to_string(),
     }
+}
+
+/// How many pre-training losses [`Learner::curl_pretrain`] averages at each end.
+const PRETRAIN_LOSS_WINDOW: usize = 100;
+
+/// Mean of the first [`PRETRAIN_LOSS_WINDOW`] values (`None` for none).
+fn head_mean(v: &[f32]) -> Option<f32> {
+    let h = &v[..v.len().min(PRETRAIN_LOSS_WINDOW)];
+    (!h.is_empty()).then(|| h.iter().sum::<f32>() / h.len() as f32)
+}
+
+/// Mean of the last [`PRETRAIN_LOSS_WINDOW`] values (`None` for none).
+fn tail_mean(v: &[f32]) -> Option<f32> {
+    let t = &v[v.len() - v.len().min(PRETRAIN_LOSS_WINDOW)..];
+    (!t.is_empty()).then(|| t.iter().sum::<f32>() / t.len() as f32)
 }

@@ -50,19 +50,41 @@ fn pretraining_runs_once_before_the_first_update_and_survives_a_checkpoint() {
     fill(&mut l);
     assert!(l.agent().needs_curl_pretraining());
     assert_eq!(l.agent().curl_steps(), 0);
-    l.update().unwrap();
+    let first = l.update().unwrap();
     assert_eq!(l.agent().curl_steps(), 7 + 1, "7 pre-training steps, then the update's own");
     assert!(!l.agent().needs_curl_pretraining());
-    l.update().unwrap();
+    let second = l.update().unwrap();
     assert_eq!(l.agent().curl_steps(), 9);
+
+    // The contrastive losses reach the metrics: the pre-training's once, the update's own each time.
+    let names = |m: &equiarm_sac::agent::Metrics| m.named().into_iter().map(|(n, _)| n).collect::<Vec<_>>();
+    assert!(first.curl_pretrain_loss.is_some_and(|v| v.is_finite() && v > 0.0), "{first:?}");
+    assert!(first.curl_loss.is_some_and(|v| v.is_finite() && v > 0.0), "{first:?}");
+    assert!(names(&first).contains(&"losses/curl_pretrain_loss"));
+    assert_eq!(second.curl_pretrain_loss, None);
+    assert!(second.curl_loss.is_some());
+    assert!(names(&second).contains(&"losses/curl_loss"));
+    assert!(!names(&second).contains(&"losses/curl_pretrain_loss"));
 
     let dir = tempfile::tempdir().unwrap();
     l.save(dir.path()).unwrap();
     let mut resumed = Learner::new(cfg()).unwrap();
     resumed.resume(dir.path()).unwrap();
     assert!(!resumed.agent().needs_curl_pretraining());
-    resumed.update().unwrap();
+    let after = resumed.update().unwrap();
     assert_eq!(resumed.agent().curl_steps(), 10, "no second pre-training after a resume");
+    assert_eq!(after.curl_pretrain_loss, None);
+}
+
+#[test]
+fn other_models_log_no_contrastive_loss() {
+    let mut c = cfg();
+    c.agent.model = ModelKind::Cnn;
+    let mut l = Learner::new(c).unwrap();
+    fill(&mut l);
+    let m = l.update().unwrap();
+    assert_eq!((m.curl_loss, m.curl_pretrain_loss), (None, None));
+    assert!(m.named().iter().all(|(n, _)| !n.contains("curl")), "{:?}", m.named());
 }
 
 #[test]

@@ -9,7 +9,8 @@
 //! Names are free-form, but the learner uses CleanRL's: `charts/episodic_return`,
 //! `charts/episodic_length`, `charts/SPS`, `losses/qf1_loss`, `losses/qf2_loss`,
 //! `losses/qf1_values`, `losses/qf2_values`, `losses/actor_loss`, `losses/alpha`,
-//! `losses/alpha_loss`, `eval/discounted_return`, `eval/success_rate`.
+//! `losses/alpha_loss`, `eval/discounted_return`, `eval/success_rate`, and FERM's
+//! `losses/curl_loss` (every update) and `losses/curl_pretrain_loss` (once, after the pre-training).
 //!
 //! Non-finite values (NaN, ±inf) are written as `null` in JSONL and `nan` in CSV; [`read_series`]
 //! reads `null` back as NaN. Each record is written with one `write` call per file and flushed, so a

@@ -134,7 +134,7 @@ impl RunRecord {
     /// first update and every tenth).
     pub fn update(&mut self, step: u64, wall_s: f64, updates: u64, m: &Metrics, sps: f64) -> Result<(), TrainError> {
         if updates.is_multiple_of(10) || updates == 1 {
-            let mut named: Vec<(&str, f64)> = m.named().to_vec();
+            let mut named = m.named();
             named.push(("charts/SPS", sps));
             named.push(("charts/updates", updates as f64));
             self.log(step, wall_s, &named)?;
