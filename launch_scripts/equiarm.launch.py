@@ -72,6 +72,8 @@ def commands(args):
     hidden = int(cfg["agent"]["hidden"])
     model = args.get("model") or cfg["agent"]["model"]
     image = f"{frame}:{size}"
+    # the scene the trainer's config names: its sims render that view with those corruptions
+    view, corrupt = cfg.get("view", "side"), cfg.get("corruption", "none")
 
     deterministic = str(args.get("deterministic", "false")).lower() in ("1", "true", "yes")
     # by name, so they are subscribed from the start; each env's observation topic too (a Transition
@@ -99,7 +101,8 @@ def commands(args):
 
     def pair(ns, env_seed, mode, extra):
         name = ns.strip("/")
-        sim = [exe, "sim", "--namespace", ns, "--task", task, "--seed", str(env_seed), "--resolution", str(frame)]
+        sim = [exe, "sim", "--namespace", ns, "--task", task, "--seed", str(env_seed), "--resolution", str(frame),
+               "--view", view, "--corrupt", corrupt]
         if ns == EVAL_NAMESPACE:
             sim.append("--eval")  # its EpisodeResults are marked as evaluation episodes
         if ns == "/env0":

@@ -10,7 +10,8 @@
 #   --seed S           base seed of the episodes (default 1000; the same S gives the same M scenes)
 #   --preset P         reduced16 (default), reduced or paper: the network's sizes (image FRAME:INPUT, hidden, model)
 #                      come from launch_scripts/configs/<preset>_<task>.json
-#   --config FILE      a training config JSON to read those sizes from instead (e.g. RUN/config.json)
+#   --config FILE      a training config JSON to read those sizes, the camera view and the corruptions
+#                      from instead (e.g. RUN/config.json)
 #   --model M          equi, cnn, sen or ferm (default: the config's)
 #   --out DIR          output directory; the bag is DIR/bag, logs in DIR/logs (default runs/eval-<task>-<time>)
 #   --timeout-s T      give up after T seconds (default 1800)
@@ -52,6 +53,7 @@ frame=$(eqa_config_get "$config" image_size)
 input=$(eqa_config_get "$config" input_size)
 hidden=$(eqa_config_get "$config" hidden)
 model=${model:-$(eqa_config_get "$config" model)}
+mapfile -t scene < <(eqa_scene_args "$config")
 out=${out:-runs/eval-$task-$(date +%Y%m%d-%H%M%S)}
 
 eqa_bin
@@ -61,7 +63,8 @@ eqa_start policy_eval "$out/logs/policy_eval.log" \
   "$EQUIARM_BIN" policy --namespace /eval --mode greedy --checkpoint "$checkpoint" \
   --model "$model" --hidden "$hidden" --image "$frame:$input" --seed "$seed"
 eqa_start sim_eval "$out/logs/sim_eval.log" \
-  "$EQUIARM_BIN" sim --namespace /eval --eval --task "$task" --seed "$seed" --resolution "$frame" --episodes "$episodes"
+  "$EQUIARM_BIN" sim --namespace /eval --eval --task "$task" --seed "$seed" --resolution "$frame" "${scene[@]}" \
+  --episodes "$episodes"
 
 eqa_log "evaluating $checkpoint ($model, hidden $hidden, image $frame:$input) on $task: $episodes episode(s), seed $seed"
 failed=0

@@ -215,27 +215,39 @@ eqa_suite_policies() {
     "${arch[@]}" --seed $((seed * 1000 + 999)) --max-lead 50 --steps-per-update "$rate"
 }
 
-# eqa_suite_sim I [NAME]: the sim of /envI, started as NAME (default simI); /env0's also publishes its
-# simulated time on /clock (for tools with use_sim_time).
+# eqa_scene_args FILE: the sim flags for a training config's camera view and corruptions
+# (`--view V --corrupt C`, the defaults where the config has none), one per line.
+eqa_scene_args() {
+  local view corrupt
+  view=$(eqa_config_get "$1" view) corrupt=$(eqa_config_get "$1" corruption)
+  printf '%s\n' --view "${view:-side}" --corrupt "${corrupt:-none}"
+}
+
+# eqa_suite_sim I [NAME]: the sim of /envI, started as NAME (default simI), with the config's view and
+# corruptions; /env0's also publishes its simulated time on /clock (for tools with use_sim_time).
 eqa_suite_sim() {
-  local i=$1 name=${2:-sim$1} clock=()
+  local i=$1 name=${2:-sim$1} clock=() scene
   [ "$i" -eq 0 ] && clock=(--clock)
+  mapfile -t scene < <(eqa_scene_args "$run_dir/config.json")
   eqa_start "$name" "$run_dir/logs/$name.log" "$EQUIARM_BIN" sim --namespace "/env$i" --task "$task" \
-    --seed $((seed * 1000 + i)) --resolution "$image" "${clock[@]}"
+    --seed $((seed * 1000 + i)) --resolution "$image" "${scene[@]}" "${clock[@]}"
 }
 
 # eqa_suite_sims: the training sims and the eval sim.
 eqa_suite_sims() {
-  local i
+  local i scene
   for i in $(seq 0 $((num_envs - 1))); do eqa_suite_sim "$i"; done
+  mapfile -t scene < <(eqa_scene_args "$run_dir/config.json")
   eqa_start sim_eval "$run_dir/logs/sim_eval.log" "$EQUIARM_BIN" sim --namespace /eval --eval --task "$task" \
-    --seed $((seed * 1000 + 999)) --resolution "$image"
+    --seed $((seed * 1000 + 999)) --resolution "$image" "${scene[@]}"
 }
 
 # eqa_config_get FILE KEY: a number or string value of KEY in a config JSON (as written by
 # `equiarm train --print-config`: one key per line; image_size, input_size, hidden and model are unique).
+# A string value may hold commas (a list of corruptions); one with quotes or backslashes is not read.
 eqa_config_get() {
-  sed -n "s/^ *\"$2\": *\"\{0,1\}\([^\",]*\)\"\{0,1\},\{0,1\} *\$/\1/p" "$1" | head -n 1
+  sed -n -e "s/^ *\"$2\": *\"\([^\"\\]*\)\",\{0,1\} *\$/\1/p" \
+    -e "s/^ *\"$2\": *\([^\",]*\),\{0,1\} *\$/\1/p" "$1" | head -n 1
 }
 
 # eqa_demos_per_env FILE N: the config's demo episodes spread over N envs (rounded up, so at least

@@ -183,6 +183,7 @@ fi
 hidden=$(eqa_config_get "$cfg" hidden)
 image="$frame:$(eqa_config_get "$cfg" input_size)"
 model=$(eqa_config_get "$cfg" model)
+mapfile -t scene < <(eqa_scene_args "$cfg")
 train=("$EQUIARM_BIN" train --preset "$preset" --task "$task" --num-envs 2 --eval-every 0 --run-dir "$out/run" -q)
 [ -z "$total_updates" ] || train+=(--total-updates "$total_updates")
 start_in trainer eqa-trainer "${train[@]}"
@@ -192,7 +193,8 @@ k=0
 for ns in eqa-actor1 eqa-actor2; do
   start_in "policy_env$k" "$ns" "$EQUIARM_BIN" policy --namespace "/env$k" --mode sample --model "$model" \
     --hidden "$hidden" --image "$image" --seed "$k" --expert-episodes "$per_env" --max-lead 10
-  start_in "sim_env$k" "$ns" "$EQUIARM_BIN" sim --namespace "/env$k" --task "$task" --seed "$k" --resolution "$frame"
+  start_in "sim_env$k" "$ns" "$EQUIARM_BIN" sim --namespace "/env$k" --task "$task" --seed "$k" --resolution "$frame" \
+    "${scene[@]}"
   k=$((k + 1))
 done
 eqa_log "running: trainer in eqa-trainer, /env0 in eqa-actor1, /env1 in eqa-actor2 (${seconds}s max; logs in $out/logs)"

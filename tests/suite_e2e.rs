@@ -24,13 +24,14 @@ fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_equiarm")
 }
 
-fn train_sh(domain: u32, run_dir: &Path, updates: u32) -> Command {
+fn train_sh(domain: u32, run_dir: &Path, updates: u32, extra: &[&str]) -> Command {
     let mut c = Command::new("bash");
     c.arg(support::repo().join("launch_scripts/train.sh"))
         .args(["--num-envs", "2", "--total-updates", &updates.to_string(), "--run-dir"])
         .arg(run_dir)
         .args(["--", "--image", "19:16", "--hidden", "8", "--batch-size", "16", "--demo-episodes", "2"])
         .args(["--eval-every", "10", "--eval-episodes", "2", "--weights-every", "5", "--training-starts", "20"])
+        .args(extra)
         .env("EQUIARM_BIN", bin())
         .env("ROS_DOMAIN_ID", domain.to_string())
         // the nodes' default log filter, as a user gets it
@@ -86,10 +87,16 @@ fn bag_opens(bag: &Path) {
 fn train_sh_runs_the_suite_to_the_end() {
     let run_dir = support::scratch("suite-e2e");
     let _cleanup = KillOnPanic(105);
-    let out = train_sh(105, &run_dir, 20).stdout(Stdio::piped()).stderr(Stdio::piped()).output().unwrap();
+    // a camera and a corruption other than the defaults: the sims must render what the trainer's config says
+    let scene = ["--view", "angle60", "--corrupt", "random_reflection"];
+    let out = train_sh(105, &run_dir, 20, &scene).stdout(Stdio::piped()).stderr(Stdio::piped()).output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "train.sh failed:\n{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
     assert!(stdout.contains("success rate"), "no evaluation table:\n{stdout}");
+    for sim in ["sim0", "sim1", "sim_eval"] {
+        let l = log(&run_dir, sim);
+        assert!(l.contains("camera elevation 60°") && l.contains("corruption random_reflection"), "{sim}:\n{l}");
+    }
     let trainer = log(&run_dir, "trainer");
     let received: u64 = trainer
         .lines()
@@ -128,8 +135,12 @@ fn train_sh_runs_the_suite_to_the_end() {
 fn ctrl_c_stops_every_process_and_leaves_a_readable_bag() {
     let run_dir = support::scratch("suite-sigint");
     let _cleanup = KillOnPanic(106);
-    let mut child =
-        train_sh(106, &run_dir, 100_000).process_group(0).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
+    let mut child = train_sh(106, &run_dir, 100_000, &[])
+        .process_group(0)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
     // Wait until the trainer has made updates (its checkpoints dir appears only later, so look at the log).
     let t0 = Instant::now();
     while !log(&run_dir, "policy0").contains("weights version 2") {

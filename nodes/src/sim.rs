@@ -61,6 +61,11 @@ pub struct SimArgs {
     /// Camera preset: side (the paper's default view), angle15 … angle90 (the view-angle sweep).
     #[arg(long)]
     pub view: Option<String>,
+    /// Symmetry corruptions of the observations: none, or a comma-separated list of
+    /// random_reflection, occlusion_projection, gripper_only (docs/paper.md §5; the training
+    /// config's `corruption`, which the launch scripts pass on).
+    #[arg(long)]
+    pub corrupt: Option<String>,
     /// Camera elevation above the table plane, degrees in (0, 90] (overrides the preset).
     #[arg(long)]
     pub elevation_deg: Option<f64>,
@@ -107,6 +112,9 @@ pub fn env_config(args: &SimArgs) -> anyhow::Result<EnvConfig> {
     if let Some(v) = &args.view {
         cfg.camera = parse_view(v)?.config();
     }
+    if let Some(c) = &args.corrupt {
+        cfg.corruption = equiarm_sim::env::Corruption::parse(c).with_context(|| format!("--corrupt '{c}'"))?;
+    }
     let cam = &mut cfg.camera;
     cam.elevation_deg = args.elevation_deg.unwrap_or(cam.elevation_deg);
     cam.distance = args.distance.unwrap_or(cam.distance);
@@ -141,6 +149,12 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
         bail!("--namespace '{}' must be one level, like /env0", args.namespace);
     }
     let task = cfg.task.name();
+    let scene = format!(
+        "camera elevation {}°, {} px, corruption {}",
+        cfg.camera.elevation_deg,
+        cfg.camera.width,
+        cfg.corruption.name()
+    );
     let mut sim = Stepper::new(cfg, &env_name, args.seed, args.eval).context("building the simulated env")?;
     let mut node = RosNode::new(&args.namespace, "sim", opts)?;
     let obs_pub = node.publisher::<Observation>("observation", qos::command())?;
@@ -156,7 +170,7 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
     };
     let camera = CameraPublishers::new(&mut node, sim.env())?;
     let timeout = Duration::from_millis(args.timeout_ms.max(1));
-    info!("{}: task {task}, seed {}, env '{env_name}', re-publish after {timeout:?}", node.name(), args.seed);
+    info!("{}: task {task}, {scene}, seed {}, env '{env_name}', re-publish after {timeout:?}", node.name(), args.seed);
     let signal = shutdown_signal();
     tokio::pin!(signal);
     'episodes: while sim.episodes_started() < args.episodes.unwrap_or(u32::MAX) {
@@ -294,5 +308,15 @@ mod tests {
         assert!(e.contains("'stacking'") && e.contains("block_in_bowl"), "{e}");
         let e = env_config(&args(&["--view", "top"])).unwrap_err().to_string();
         assert!(e.contains("angle90"), "{e}");
+    }
+
+    #[test]
+    fn corrupt_sets_the_corruptions_and_a_bad_name_is_named() {
+        assert_eq!(env_config(&args(&[])).unwrap().corruption, Default::default());
+        let c = env_config(&args(&["--corrupt", "random_reflection,gripper_only"])).unwrap().corruption;
+        assert!(c.random_reflection && c.gripper_only && !c.occlusion_projection, "{c:?}");
+        assert_eq!(env_config(&args(&["--corrupt", "none"])).unwrap().corruption, Default::default());
+        let e = format!("{:#}", env_config(&args(&["--corrupt", "mirror"])).unwrap_err());
+        assert!(e.contains("--corrupt 'mirror'") && e.contains("`mirror`") && e.contains("random_reflection"), "{e}");
     }
 }

@@ -316,6 +316,7 @@ def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
         assert sim[1] == "sim" and _flag(sim, "--namespace") == ns and _flag(sim, "--task") == "block_picking"
         assert _flag(sim, "--seed") == str(seed) and _flag(sim, "--resolution") == str(frame)
         assert ("--eval" in sim) == (ns == "/eval")
+        assert (_flag(sim, "--view"), _flag(sim, "--corrupt")) == ("side", "none")
         assert ("--clock" in sim) == (ns == "/env0"), "exactly one sim publishes /clock"
         assert pol[1] == "policy" and _flag(pol, "--namespace") == ns
         assert _flag(pol, "--mode") == ("greedy" if ns == "/eval" else "sample")
@@ -342,7 +343,8 @@ def test_launch_file_paper_preset_and_config_file(launch_file, tmp_path):
     assert _flag(procs["policy_env0"].kwargs["cmd"], "--image") == \
         f"{paper['image_size']}:{paper['agent']['input_size']}"
     assert "--total-updates" not in procs["trainer"].kwargs["cmd"]
-    cfg = dict(paper, image_size=100, agent=dict(paper["agent"], input_size=90, hidden=8, model="cnn"))
+    cfg = dict(paper, image_size=100, agent=dict(paper["agent"], input_size=90, hidden=8, model="cnn"),
+               view="angle30", corruption="random_reflection,gripper_only")
     f = tmp_path / "mine.json"
     f.write_text(json.dumps(cfg))
     _, procs = launch_file(config=str(f), num_envs="2", model="sen")
@@ -350,7 +352,11 @@ def test_launch_file_paper_preset_and_config_file(launch_file, tmp_path):
     assert _flag(tr, "--config") == str(f) and "--preset" not in tr and _flag(tr, "--model") == "sen"
     pol = procs["policy_env1"].kwargs["cmd"]
     assert (_flag(pol, "--image"), _flag(pol, "--hidden"), _flag(pol, "--model")) == ("100:90", "8", "sen")
-    assert len([p for p in procs if p.startswith("sim_")]) == 3
+    sims = [p.kwargs["cmd"] for name, p in procs.items() if name.startswith("sim_")]
+    assert len(sims) == 3
+    # the sims render the config's scene, or the trainer learns from another camera than it was told
+    assert all((_flag(s, "--view"), _flag(s, "--corrupt")) == ("angle30", "random_reflection,gripper_only")
+               for s in sims)
 
 
 def test_launch_scripts_compile():
