@@ -14,26 +14,12 @@ use std::path::{Path, PathBuf};
 
 use equiarm_sac::config::TrainConfig;
 use equiarm_train::evaluation::EvalResult;
-use equiarm_train::plot::{Chart, Series, palette, write_png};
+use equiarm_train::plot::{Chart, Series, mean_se, palette, write_png};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ExperimentError, Result, io};
 use crate::grid::{Cell, Grid, VARIANTS, Variant};
 use crate::runner::{RESULT_FILE, RunResult, RunState, run_state};
-
-/// Mean and standard error (s.d. / √n; 0 for one value; NaN for none).
-pub fn mean_se(v: &[f64]) -> (f64, f64) {
-    if v.is_empty() {
-        return (f64::NAN, f64::NAN);
-    }
-    let n = v.len() as f64;
-    let m = v.iter().sum::<f64>() / n;
-    if v.len() < 2 {
-        return (m, 0.0);
-    }
-    let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
-    (m, (var / n).sqrt())
-}
 
 /// One run as the report sees it.
 #[derive(Clone, Debug)]
@@ -326,14 +312,6 @@ pub fn all_finished(grid: &Grid, runs: &Path, archive: &BTreeMap<PathBuf, Archiv
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn mean_and_standard_error() {
-        assert_eq!(mean_se(&[0.5]), (0.5, 0.0));
-        let (m, se) = mean_se(&[0.8, 0.9, 1.0, 0.9]);
-        assert!((m - 0.9).abs() < 1e-12 && (se - (0.02f64 / 3.0 / 4.0).sqrt()).abs() < 1e-12, "{m} {se}");
-        assert!(mean_se(&[]).0.is_nan());
-    }
 
     #[test]
     fn links_are_relative_to_the_report() {

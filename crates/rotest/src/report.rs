@@ -7,6 +7,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use equiarm_train::plot::{ensure_font, mean_se};
 use plotters::prelude::*;
 
 use crate::error::{Result, RotestError, io};
@@ -48,20 +49,6 @@ pub fn collect_runs(dir: &Path) -> Result<Vec<(PathBuf, RunRecord)>> {
             Ok((p, r))
         })
         .collect()
-}
-
-/// Mean and standard error (s.d. / √n; 0 for one value).
-pub fn mean_se(v: &[f64]) -> (f64, f64) {
-    let n = v.len() as f64;
-    if v.is_empty() {
-        return (f64::NAN, f64::NAN);
-    }
-    let m = v.iter().sum::<f64>() / n;
-    if v.len() < 2 {
-        return (m, 0.0);
-    }
-    let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
-    (m, (var / n).sqrt())
 }
 
 /// Test accuracies by setting → variant → training pairs.
@@ -110,13 +97,6 @@ pub fn markdown(t: &Table) -> String {
     s
 }
 
-fn register_font() -> bool {
-    static DONE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *DONE.get_or_init(|| {
-        plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular()).is_ok()
-    })
-}
-
 /// One PNG: accuracy (%) against training pairs (log scale) for each variant of `setting`, error bars of one
 /// s.e.; `bound` (if below 1) as a dashed line.
 pub fn figure(
@@ -126,9 +106,7 @@ pub fn figure(
     bound: Option<f64>,
 ) -> Result<()> {
     let err = |m: String| RotestError::Image { path: path.to_path_buf(), message: m };
-    if !register_font() {
-        return Err(err("cannot load the embedded DejaVu Sans font".into()));
-    }
+    ensure_font().map_err(|e| err(e.to_string()))?;
     let (w, h) = (640u32, 420u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];
     {
@@ -331,14 +309,5 @@ mod tests {
         let e = write(&root.join("empty"), &root.join("out2"), &bounds).unwrap_err().to_string();
         assert!(e.contains("no run.json") && e.contains("empty"), "{e}");
         let _ = std::fs::remove_dir_all(&root);
-    }
-
-    #[test]
-    fn mean_and_standard_error() {
-        assert_eq!(mean_se(&[0.5]), (0.5, 0.0));
-        let (m, se) = mean_se(&[0.2, 0.4, 0.6, 0.8]);
-        assert!((m - 0.5).abs() < 1e-12);
-        // s.d. = sqrt(0.2/3), s.e. = s.d. / 2
-        assert!((se - (0.2f64 / 3.0).sqrt() / 2.0).abs() < 1e-12);
     }
 }

@@ -143,6 +143,21 @@ impl Default for Chart {
     }
 }
 
+/// Mean and standard error (s.d. / √n, with the n − 1 s.d.; 0 for one value; NaN for none): the
+/// "mean ± s.e. over seeds" of every report's tables and bands.
+pub fn mean_se(v: &[f64]) -> (f64, f64) {
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    if v.len() < 2 {
+        return (m, 0.0);
+    }
+    let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
+    (m, (var / n).sqrt())
+}
+
 /// A distinct colour for the `i`-th series (10 colours, then repeats): 0 blue (Equi), 1 orange
 /// (CNN), 2 green, 3 red, 4 purple, 5 brown, 6 pink, 7 grey, 8 olive, 9 cyan.
 pub fn palette(i: usize) -> [u8; 3] {
@@ -246,8 +261,9 @@ const SWATCH_W: i32 = 22;
 const LEGEND_PAD: i32 = 8;
 const LEGEND_MAX_CHARS: usize = 40;
 
-/// Registers DejaVu Sans (from the `dejavu` crate) as plotters' `sans-serif` font, once per process.
-fn ensure_font() -> Result<(), PlotError> {
+/// Registers DejaVu Sans (from the `dejavu` crate) as plotters' `sans-serif` font, once per process
+/// (for charts drawn with plotters directly, like the rotation-estimation report's log-scale ones).
+pub fn ensure_font() -> Result<(), PlotError> {
     static REGISTERED: OnceLock<bool> = OnceLock::new();
     let ok = *REGISTERED.get_or_init(|| register_font(FONT, FontStyle::Normal, dejavu::sans::regular()).is_ok());
     if ok { Ok(()) } else { Err(PlotError::Draw("the embedded DejaVu Sans font could not be loaded".into())) }
@@ -634,6 +650,17 @@ pub fn write_png(path: &Path, chart: &Chart, series: &[Series]) -> Result<(), Pl
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn mean_and_standard_error() {
+        assert_eq!(mean_se(&[0.5]), (0.5, 0.0));
+        let (m, se) = mean_se(&[0.8, 0.9, 1.0, 0.9]);
+        assert!((m - 0.9).abs() < 1e-12 && (se - (0.02f64 / 3.0 / 4.0).sqrt()).abs() < 1e-12, "{m} {se}");
+        let (m, se) = mean_se(&[0.2, 0.4, 0.6, 0.8]);
+        // s.d. = sqrt(0.2/3), s.e. = s.d. / 2
+        assert!((m - 0.5).abs() < 1e-12 && (se - (0.2f64 / 3.0).sqrt() / 2.0).abs() < 1e-12, "{m} {se}");
+        assert!(mean_se(&[]).0.is_nan() && mean_se(&[]).1.is_nan());
+    }
 
     /// Renders like [`render`], also returning where the plot landed.
     fn render_framed(chart: &Chart, series: &[Series]) -> (RgbImage, PlotArea) {
