@@ -241,7 +241,7 @@ fn training_run(args: &DeviceCheckArgs, base: &TrainConfig, device: &Device) -> 
             args.run_minutes
         );
     }
-    print!("{summary}");
+    println!("{summary}");
     println!(
         "{} updates in {:.0} s of training ({:.2} updates/s, demonstrations included)",
         summary.updates,
