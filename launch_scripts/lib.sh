@@ -29,9 +29,14 @@ eqa_default_signals() {
 
 eqa_log() { printf '[%s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
 
-# EQUIARM_BIN when set (nothing is built); else `cargo build` of the dev profile (dependencies and the
-# hot crates optimised; the test command builds the same profile with the GPU build's `vulkan`
-# feature on as well) into CARGO_TARGET_DIR (default ~/.cache/equiarm/target).
+# The build the launch scripts and the test command share (tests/run_all.sh builds the same): the dev
+# profile (dependencies and the hot crates optimised) of every program, as the GPU build (the CPU
+# stays the default device; docs/backends.md), so whichever runs first builds for both.
+EQA_FEATURES=(--features vulkan)
+EQA_BUILD=(cargo build --locked --workspace --bins "${EQA_FEATURES[@]}")
+
+# EQUIARM_BIN when set (nothing is built); else EQA_BUILD into CARGO_TARGET_DIR (default
+# ~/.cache/equiarm/target).
 eqa_bin() {
   if [ -n "${EQUIARM_BIN:-}" ]; then
     [ -x "$EQUIARM_BIN" ] || command -v "$EQUIARM_BIN" >/dev/null \
@@ -39,8 +44,8 @@ eqa_bin() {
     return 0
   fi
   export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/equiarm/target}"
-  eqa_log "building equiarm (cargo build --locked --bin equiarm, target dir $CARGO_TARGET_DIR)"
-  (cd "$EQA_ROOT" && cargo build --locked --bin equiarm) >&2
+  eqa_log "building equiarm (${EQA_BUILD[*]}, target dir $CARGO_TARGET_DIR)"
+  (cd "$EQA_ROOT" && "${EQA_BUILD[@]}") >&2
   EQUIARM_BIN="$CARGO_TARGET_DIR/debug/equiarm"
   export EQUIARM_BIN
 }

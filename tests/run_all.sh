@@ -17,8 +17,10 @@ source tests/python_env.sh
 # The GPU build's device tests run on Mesa's lavapipe, a Vulkan driver on the CPU (docs/backends.md).
 source tests/vulkan_env.sh
 
-# Everything is built once, as the GPU build (why and what it costs: docs/backends.md).
-features=(--features vulkan)
+# Everything is built once, as the GPU build (why and what it costs: docs/backends.md), and the
+# programs exactly as the launch scripts build them (EQA_BUILD), so neither rebuilds after the other.
+source launch_scripts/lib.sh
+features=("${EQA_FEATURES[@]}")
 
 step "style gates"
 # formatting (rustfmt.toml), lints with every warning an error (missing_docs included: the workspace
@@ -30,7 +32,7 @@ step "build (target dir: $CARGO_TARGET_DIR)"
 # Every test target (examples included) in one go, then the programs (mostly built by then); the
 # benchmarks are linted by clippy above and built when run (docs/benchmarks.md).
 cargo test --locked --workspace "${features[@]}" --no-run
-cargo build --locked --workspace --bins "${features[@]}"
+"${EQA_BUILD[@]}"
 
 # A private network namespace: as root (CI) or through an unprivileged user namespace.
 ns=()
