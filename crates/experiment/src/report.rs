@@ -110,10 +110,8 @@ pub fn collect(grid: &Grid, runs: &Path, archive: &BTreeMap<PathBuf, Archived>) 
         let evals_file = dir.join("evals.json");
         let latest = dir.join("checkpoints").join("latest");
         let evals: Vec<EvalResult> = if result.is_none() && latest.is_file() {
-            let state = equiarm_train::rundir::find_checkpoint(&dir)?.join(equiarm_train::inprocess::STATE_FILE);
-            let v: serde_json::Value = equiarm_sac::learner::read_json(&state).map_err(|e| bad(e.to_string()))?;
-            serde_json::from_value(v.get("evals").cloned().unwrap_or_default())
-                .map_err(|e| bad(format!("{}: {e}", state.display())))?
+            let ckpt = equiarm_train::rundir::find_checkpoint(&dir)?;
+            equiarm_train::inprocess::LoopState::read(&ckpt).map_err(|e| bad(e.to_string()))?.evals
         } else if evals_file.is_file() {
             equiarm_sac::learner::read_json(&evals_file).map_err(|e| bad(format!("evals.json: {e}")))?
         } else {

@@ -138,12 +138,12 @@ pub fn run_one(
         .collect::<Result<_, _>>()
         .map_err(equiarm_train::TrainError::from)?;
     let heldout = evaluate_on(&mut learner, &mut envs, heldout_episodes, Stream::HeldOut)?;
-    let state: serde_json::Value = read_json(&find_checkpoint(dir)?.join(equiarm_train::inprocess::STATE_FILE))
+    let state = equiarm_train::inprocess::LoopState::read(&find_checkpoint(dir)?)
         .map_err(|e| ExperimentError::Run { dir: dir.to_path_buf(), message: e.to_string() })?;
     let result = RunResult {
         updates: summary.updates,
         env_steps: summary.global_step,
-        train_seconds: state.get("wall_time").and_then(|v| v.as_f64()).unwrap_or(summary.wall_s),
+        train_seconds: state.wall_time,
         last_eval: summary.evals.last().cloned(),
         heldout,
         heldout_seconds: t0.elapsed().as_secs_f64(),

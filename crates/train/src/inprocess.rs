@@ -12,7 +12,7 @@
 //! Limitations: envs are stepped one after another on the calling thread (stepping costs ~1 ms,
 //! an update hundreds of ms on a CPU).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -44,18 +44,26 @@ struct Slot {
     disc: f64,
 }
 
-/// Per-env state saved with a checkpoint (`loop.json`).
+/// The in-process loop's state saved with a checkpoint ([`STATE_FILE`]).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct LoopState {
-    /// Per env: episode index, and the normalised actions taken so far in it.
-    envs: Vec<(u64, Vec<[f32; 5]>)>,
+pub struct LoopState {
+    /// Per env: episode index, and the normalised actions taken so far in it (replayed on resume).
+    pub envs: Vec<(u64, Vec<[f32; 5]>)>,
     /// Env steps so far (training envs).
-    global_step: u64,
+    pub global_step: u64,
     /// Evaluations so far.
-    evals: Vec<EvalResult>,
+    pub evals: Vec<EvalResult>,
     /// Seconds of training before this checkpoint.
-    wall_time: f64,
+    pub wall_time: f64,
+}
+
+impl LoopState {
+    /// The state saved in checkpoint directory `checkpoint`; an error names the file and what is wrong.
+    pub fn read(checkpoint: &Path) -> Result<Self, TrainError> {
+        let path = checkpoint.join(STATE_FILE);
+        read_json(&path).map_err(|e| TrainError::io(&path, e))
+    }
 }
 
 /// Options of one invocation (not part of the config: a checkpoint resumes under other options).
@@ -112,7 +120,7 @@ pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Resu
 
     if let Some(dir) = &opts.resume {
         learner.resume(dir)?;
-        let st: LoopState = read_json(&dir.join(STATE_FILE)).map_err(|e| TrainError::io(dir, e))?;
+        let st = LoopState::read(dir)?;
         if st.envs.len() != n {
             return Err(TrainError::io(dir, format!("{STATE_FILE} has {} envs, the config {n}", st.envs.len())));
         }
