@@ -218,7 +218,8 @@ impl Learner {
             losses.push(self.agent.curl_step(anchor, positive, slots.len())?);
         }
         self.agent.set_curl_pretrained();
-        if let (Some(first), Some(last)) = (head_mean(&losses), tail_mean(&losses)) {
+        if let (Some(first), Some(last)) = (mean(&losses[..losses.len().min(PRETRAIN_LOSS_WINDOW)]), tail_mean(&losses))
+        {
             log::info!(
                 "FERM pre-training: {} contrastive steps on {} transitions, loss {first:.4} (mean of the first {n}) -> {last:.4} (mean of the last {n})",
                 losses.len(),
@@ -451,14 +452,12 @@ pub fn first_difference(a: &serde_json::Value, b: &serde_json::Value, prefix: &s
 /// How many pre-training losses [`Learner::curl_pretrain`] averages at each end.
 const PRETRAIN_LOSS_WINDOW: usize = 100;
 
-/// Mean of the first [`PRETRAIN_LOSS_WINDOW`] values (`None` for none).
-fn head_mean(v: &[f32]) -> Option<f32> {
-    let h = &v[..v.len().min(PRETRAIN_LOSS_WINDOW)];
-    (!h.is_empty()).then(|| h.iter().sum::<f32>() / h.len() as f32)
+/// The mean of `v` (`None` for none).
+fn mean(v: &[f32]) -> Option<f32> {
+    (!v.is_empty()).then(|| v.iter().sum::<f32>() / v.len() as f32)
 }
 
-/// Mean of the last [`PRETRAIN_LOSS_WINDOW`] values (`None` for none).
+/// The mean of the last [`PRETRAIN_LOSS_WINDOW`] values (`None` for none).
 fn tail_mean(v: &[f32]) -> Option<f32> {
-    let t = &v[v.len() - v.len().min(PRETRAIN_LOSS_WINDOW)..];
-    (!t.is_empty()).then(|| t.iter().sum::<f32>() / t.len() as f32)
+    mean(&v[v.len().saturating_sub(PRETRAIN_LOSS_WINDOW)..])
 }
