@@ -67,6 +67,11 @@ pub struct TrainArgs {
     /// constant (the paper).
     #[arg(long, value_name = "LR|none")]
     pub lr_final: Option<String>,
+    /// Precision of the convolutions' matrix products: f32 (the default) or bf16 (Intel AMX:
+    /// operands rounded to bfloat16, f32 sums; faster where the CPU has AMX). Part of the config
+    /// (`agent.matmul`).
+    #[arg(long)]
+    pub matmul: Option<equiarm_nn::kernels::MatmulPrecision>,
     /// Rendered frame size and network input size, as FRAME:INPUT (e.g. 76:64, 152:128).
     #[arg(long)]
     pub image: Option<String>,
@@ -186,6 +191,9 @@ impl TrainArgs {
                 "none" => None,
                 v => Some(v.parse().with_context(|| format!("--lr-final `{v}`: expected a number or `none`"))?),
             };
+        }
+        if let Some(p) = self.matmul {
+            cfg.agent.matmul = p;
         }
         if let Some(img) = &self.image {
             let (f, i) = img

@@ -4,6 +4,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
+use equiarm_nn::kernels::MatmulPrecision;
 use equiarm_sim::rotest::{Corruptions, PAPER_SETTINGS, PairConfig};
 
 use crate::bound::dataset_bound;
@@ -189,6 +190,10 @@ pub struct TrainOpts {
     /// Device: `cpu`, or `vulkan` / `vulkan:N` / `vulkan:cpu` in the GPU build (`--features vulkan`).
     #[arg(long, default_value = "cpu")]
     pub device: String,
+    /// Precision of the convolutions' matrix products on the CPU: f32 (the paper's) or bf16 (Intel
+    /// AMX: operands rounded to bfloat16, f32 sums). Recorded in each run's config.
+    #[arg(long, default_value = "f32")]
+    pub matmul: MatmulPrecision,
 }
 
 impl TrainOpts {
@@ -206,6 +211,7 @@ impl TrainOpts {
         cfg.min_epochs = self.min_epochs;
         cfg.patience = self.patience;
         cfg.max_epochs = self.max_epochs;
+        cfg.matmul = self.matmul;
         cfg.validate()?;
         Ok(cfg)
     }

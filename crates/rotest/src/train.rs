@@ -11,6 +11,7 @@ use equiarm_nn::burn::optim::{AdamConfig, GradientsParams};
 use equiarm_nn::burn::tensor::activation::log_softmax;
 use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
 use equiarm_nn::init::Init;
+use equiarm_nn::kernels::MatmulPrecision;
 use equiarm_nn::nets::{NetConfig, RotCnnNet, RotEquiNet};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
@@ -86,6 +87,10 @@ pub struct TrainConfig {
     pub max_epochs: usize,
     /// Seed of the split, the initial weights, the batch order and the crops.
     pub seed: u64,
+    /// Precision of the convolutions' matrix products: `f32` (the paper's) or `bf16` (Intel AMX,
+    /// docs/backends.md). Process-wide: [`run`] sets it.
+    #[serde(default, skip_serializing_if = "MatmulPrecision::is_f32")]
+    pub matmul: MatmulPrecision,
 }
 
 impl TrainConfig {
@@ -107,6 +112,7 @@ impl TrainConfig {
             patience: 100,
             max_epochs: 1000,
             seed,
+            matmul: MatmulPrecision::F32,
         }
     }
 
@@ -142,6 +148,9 @@ impl TrainConfig {
         }
         if self.batch == 0 {
             return bad("--batch", "must be at least 1".into());
+        }
+        if let Err(e) = self.matmul.supported() {
+            return bad("--matmul", e);
         }
         if self.max_epochs == 0 || self.min_epochs > self.max_epochs {
             return bad(
@@ -602,6 +611,8 @@ pub fn run(
     on_epoch: &mut dyn FnMut(&EpochRecord),
 ) -> Result<RunRecord> {
     cfg.validate()?;
+    equiarm_nn::kernels::set_matmul_precision(cfg.matmul)
+        .map_err(|message| RotestError::Config { field: "--matmul", message })?;
     let [tr, va, te] = split(ds.len(), cfg)?;
     let side = cfg.full_side();
     let mut train = Samples::from_dataset(ds, &tr, side)?;

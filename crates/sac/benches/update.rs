@@ -21,6 +21,7 @@ use std::process::Command;
 use std::time::Instant;
 
 use clap::{Parser, ValueEnum};
+use equiarm_nn::kernels::MatmulPrecision;
 use equiarm_sac::agent::{AgentConfig, ModelKind};
 use equiarm_sac::config::TrainConfig;
 use equiarm_sac::timing::{random_batch, time_update};
@@ -62,6 +63,10 @@ struct Args {
     /// Our device (`cpu` is the default build's flex backend with our kernels).
     #[arg(long, default_value = "cpu")]
     device: String,
+    /// Matrix-product precisions of the convolutions to time, comma-separated: `f32`, `bf16`
+    /// (Intel AMX; `agent.matmul` of the config).
+    #[arg(long, value_delimiter = ',', default_value = "f32", value_parser = matmul_precision)]
+    matmul: Vec<MatmulPrecision>,
     /// Hidden size instead of the preset's.
     #[arg(long)]
     hidden: Option<usize>,
@@ -71,6 +76,11 @@ struct Args {
     /// Passed by `cargo bench` to every bench program; ignored.
     #[arg(long, hide = true)]
     bench: bool,
+}
+
+fn matmul_precision(name: &str) -> Result<MatmulPrecision, String> {
+    let p: MatmulPrecision = name.parse()?;
+    p.supported().map(|()| p)
 }
 
 fn peak_rss_mb() -> f64 {
@@ -176,7 +186,9 @@ fn main() {
     });
     let peak = sgemm_peak();
     println!("device {} ({device:?}); sgemm peak (gemm crate, 1 thread, 1024³): {peak:.1} GFLOP/s", args.device);
-    println!("model  config    thr batch  px | update s  peer s  ratio | GFLOP  GFLOP/s  of peak | act b1 ms  peer ms");
+    println!(
+        "model  config    mm   thr batch  px | update s  peer s  ratio | GFLOP  GFLOP/s  of peak | act b1 ms  peer ms"
+    );
     let mut csv = Vec::new();
     // One pool per thread count for the whole run (pools made and dropped per case left later
     // cases up to 1.9x slower, from threads of dropped pools still winding down).
@@ -197,50 +209,55 @@ fn main() {
             let (s, b) = (preset.agent.input_size, args.batch.unwrap_or(preset.batch_size));
             let cfg = AgentConfig { model, hidden, input_size: s, ..AgentConfig::default() };
             for (&threads, pool) in args.threads.iter().zip(&pools) {
-                let (u, a, flops) = pool.install(|| {
-                    let data = random_batch(b, s, 3);
-                    let mut flops = 0;
-                    equiarm_nn::kernels::gemm_conv::reset_flop_count();
-                    let reps = args.reps as usize;
-                    let t = time_update(&cfg, &data, &device, 1, reps, (5 * reps).max(5), |_| {
-                        flops = equiarm_nn::kernels::gemm_conv::flop_count();
-                        equiarm_nn::kernels::gemm_conv::reset_flop_count();
-                    })
-                    .expect("update");
-                    (t.update_median(), t.act_median(), flops)
-                });
                 let p = if args.no_peer || args.hidden.is_some() || args.batch.is_some() || model == ModelKind::Sen {
                     None
                 } else {
                     peer(model, preset_name, threads, args.reps)
                 };
-                let gflop = flops as f64 / 1e9;
-                let rate = gflop / u;
-                let of_peak = rate / (peak * threads as f64);
-                let (pu, pa) = p.as_ref().map_or((f64::NAN, f64::NAN), |p| (p.update_s, p.act_b1_s));
-                println!(
-                    "{:<6} {:<9} {:>3} {:>5} {:>3} | {:>8.3} {:>7.3} {:>6.2} | {:>5.1} {:>8.1} {:>7.0}% | {:>9.2} {:>8.2}",
-                    model.name(),
-                    preset_name,
-                    threads,
-                    b,
-                    s,
-                    u,
-                    pu,
-                    u / pu,
-                    gflop,
-                    rate,
-                    100.0 * of_peak,
-                    1e3 * a,
-                    1e3 * pa
-                );
-                let figures = [u, pu, u / pu, gflop, rate, of_peak, a, pa].map(|v| format!("{v:.6}")).join(",");
-                csv.push(format!("csv,{},{preset_name},{threads},{b},{s},{figures}", model.name()));
+                for &mm in &args.matmul {
+                    // Building the agent sets the process's precision from its config.
+                    let cfg = AgentConfig { matmul: mm, ..cfg.clone() };
+                    let (u, a, flops) = pool.install(|| {
+                        let data = random_batch(b, s, 3);
+                        let mut flops = 0;
+                        equiarm_nn::kernels::gemm_conv::reset_flop_count();
+                        let reps = args.reps as usize;
+                        let t = time_update(&cfg, &data, &device, 1, reps, (5 * reps).max(5), |_| {
+                            flops = equiarm_nn::kernels::gemm_conv::flop_count();
+                            equiarm_nn::kernels::gemm_conv::reset_flop_count();
+                        })
+                        .expect("update");
+                        (t.update_median(), t.act_median(), flops)
+                    });
+                    let gflop = flops as f64 / 1e9;
+                    let rate = gflop / u;
+                    let of_peak = rate / (peak * threads as f64);
+                    let (pu, pa) = p.as_ref().map_or((f64::NAN, f64::NAN), |p| (p.update_s, p.act_b1_s));
+                    println!(
+                        "{:<6} {:<9} {:<4} {:>3} {:>5} {:>3} | {:>8.3} {:>7.3} {:>6.2} | {:>5.1} {:>8.1} {:>7.0}% | {:>9.2} {:>8.2}",
+                        model.name(),
+                        preset_name,
+                        mm.name(),
+                        threads,
+                        b,
+                        s,
+                        u,
+                        pu,
+                        u / pu,
+                        gflop,
+                        rate,
+                        100.0 * of_peak,
+                        1e3 * a,
+                        1e3 * pa
+                    );
+                    let figures = [u, pu, u / pu, gflop, rate, of_peak, a, pa].map(|v| format!("{v:.6}")).join(",");
+                    csv.push(format!("csv,{},{preset_name},{},{threads},{b},{s},{figures}", model.name(), mm.name()));
+                }
             }
         }
     }
     println!(
-        "csv,model,config,threads,batch,px,update_s,peer_update_s,ratio,gflop,gflops,of_peak,act_b1_s,peer_act_b1_s"
+        "csv,model,config,matmul,threads,batch,px,update_s,peer_update_s,ratio,gflop,gflops,of_peak,act_b1_s,peer_act_b1_s"
     );
     for line in csv {
         println!("{line}");

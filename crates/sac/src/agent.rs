@@ -28,6 +28,7 @@ use equiarm_nn::burn::module::Module;
 use equiarm_nn::burn::optim::GradientsParams;
 use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
 use equiarm_nn::init::Init;
+use equiarm_nn::kernels::MatmulPrecision;
 use equiarm_nn::nets::{
     Actor, CnnActor, CnnCritic, Critic, CurlBilinear, EquiActor, EquiCritic, FermActor, FermCritic, FermEncoder,
     NetConfig, SenActor, SenCritic, gaussian_sample,
@@ -62,6 +63,9 @@ pub enum AgentError {
     /// The device cannot be used.
     #[error(transparent)]
     Device(#[from] equiarm_nn::device::DeviceError),
+    /// `matmul` asks for what this machine cannot do.
+    #[error("agent.matmul: {0}")]
+    Matmul(String),
     /// The agent state file is missing or wrong.
     #[error("{path}: {message}")]
     State {
@@ -165,6 +169,11 @@ pub struct AgentConfig {
     /// FERM only: contrastive (CURL) steps on the demonstrations before the first SAC update
     /// (docs/paper.md §1.10: 1,600).
     pub curl_pretrain_steps: usize,
+    /// Precision of the convolutions' matrix products on the CPU: `f32` (the default, as the
+    /// paper) or `bf16` (operands rounded to bfloat16, f32 sums, on Intel AMX; docs/backends.md).
+    /// Process-wide: building an agent sets it for every convolution of the process.
+    #[serde(skip_serializing_if = "MatmulPrecision::is_f32")]
+    pub matmul: MatmulPrecision,
 }
 
 impl Default for AgentConfig {
@@ -182,6 +191,7 @@ impl Default for AgentConfig {
             expert_weight: 1.0,
             use_is_weights: false,
             curl_pretrain_steps: 1600,
+            matmul: MatmulPrecision::F32,
         }
     }
 }
@@ -894,6 +904,7 @@ impl Agent {
     /// A fresh agent of `cfg.model` on `device` (see [`equiarm_nn::device`]), weights and noise
     /// seeded with `seed`. On the CPU this is [`Agent::new`], bit for bit.
     pub fn new_on(cfg: AgentConfig, seed: u64, device: &Device) -> Result<Self, AgentError> {
+        equiarm_nn::kernels::set_matmul_precision(cfg.matmul).map_err(AgentError::Matmul)?;
         Ok(match cfg.model {
             ModelKind::Equi => Agent::Equi(Sac::build_on(cfg, seed, device, EquiActor::new, EquiCritic::new)?),
             ModelKind::Cnn => Agent::Cnn(Sac::build_on(cfg, seed, device, CnnActor::new, CnnCritic::new)?),

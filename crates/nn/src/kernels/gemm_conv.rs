@@ -262,14 +262,15 @@ fn col2im(s: &ConvShape, cols: &[f32], n: usize, rows: (usize, usize), dx: &mut 
     }
 }
 
-/// `dst (m×n) = [dst +] lhs (m×k) · rhs (k×n)` with explicit row and column strides (in floats).
+/// `dst (m×n) = [dst +] lhs (m×k) · rhs (k×n)` with explicit row and column strides (in floats), in
+/// the process's [`super::MatmulPrecision`].
 #[allow(clippy::too_many_arguments)]
 fn matmul(
     m: usize,
     n: usize,
     k: usize,
     dst: &mut [f32],
-    dst_rs: usize,
+    (dst_rs, dst_cs): (usize, usize),
     accumulate: bool,
     lhs: &[f32],
     (lhs_rs, lhs_cs): (usize, usize),
@@ -282,14 +283,20 @@ fn matmul(
     if k == 0 {
         if !accumulate {
             for r in 0..m {
-                dst[r * dst_rs..][..n].fill(0.0);
+                for c in 0..n {
+                    dst[r * dst_rs + c * dst_cs] = 0.0;
+                }
             }
         }
         return;
     }
     FLOPS.fetch_add(2 * (m * n * k) as u64, Ordering::Relaxed);
+    if super::matmul_precision() == super::MatmulPrecision::Bf16 {
+        super::amx::matmul(m, n, k, dst, (dst_rs, dst_cs), accumulate, lhs, (lhs_rs, lhs_cs), rhs, (rhs_rs, rhs_cs));
+        return;
+    }
     // The largest element each operand's strides reach must lie inside its slice.
-    assert!((m - 1) * dst_rs + n <= dst.len(), "gemm dst out of bounds");
+    assert!((m - 1) * dst_rs + (n - 1) * dst_cs < dst.len(), "gemm dst out of bounds");
     assert!((m - 1) * lhs_rs + (k - 1) * lhs_cs < lhs.len(), "gemm lhs out of bounds");
     assert!((k - 1) * rhs_rs + (n - 1) * rhs_cs < rhs.len(), "gemm rhs out of bounds");
     // SAFETY: the three assertions above keep every element the strides address inside the
@@ -300,7 +307,7 @@ fn matmul(
             n,
             k,
             dst.as_mut_ptr(),
-            1,
+            dst_cs as isize,
             dst_rs as isize,
             accumulate,
             lhs.as_ptr(),
@@ -358,13 +365,13 @@ pub fn forward(s: &ConvShape, x: &[f32], weight: &[f32], bias: &[f32], relu: boo
                     // One sample's rows: [cout, rows·W'] is a strided block of its NCHW output.
                     let ys = &mut ypart[(u.i0 - a) * s.out_len()..][..s.out_len()];
                     let off = u.rows.0 * wo;
-                    matmul(o, nc, kd, &mut ys[off..], p, false, weight, (kd, 1), cols, (nc, 1));
+                    matmul(o, nc, kd, &mut ys[off..], (p, 1), false, weight, (kd, 1), cols, (nc, 1));
                     for (oc, &bv) in bias.iter().enumerate() {
                         act(&mut ys[oc * p + off..][..nc], bv);
                     }
                 } else {
                     let out = &mut out[..o * nc];
-                    matmul(o, nc, kd, out, nc, false, weight, (kd, 1), cols, (nc, 1));
+                    matmul(o, nc, kd, out, (nc, 1), false, weight, (kd, 1), cols, (nc, 1));
                     // Scatter [cout, n·P] into NCHW with bias (and ReLU).
                     for i in 0..u.n {
                         let ys = &mut ypart[(u.i0 - a + i) * s.out_len()..][..s.out_len()];
@@ -441,6 +448,13 @@ pub fn backward(
         }
         None => dx_parts.extend(ranges.iter().map(|_| None)),
     }
+    let bf16 = super::matmul_precision() == super::MatmulPrecision::Bf16;
+    // In bf16 the input gradient's left operand Wᵀ is packed once per piece: transposed here once,
+    // its packing is a contiguous conversion.
+    let wt: Vec<f32> = match bf16 && want.x {
+        true => (0..kd).flat_map(|r| (0..o).map(move |c| weight[c * kd + r])).collect(),
+        false => Vec::new(),
+    };
     // Per thread: its partial weight and bias gradients.
     type Partial = (Option<Vec<f32>>, Option<Vec<f32>>);
     let partials: Vec<Partial> = ranges
@@ -448,6 +462,8 @@ pub fn backward(
         .zip(dx_parts.into_par_iter())
         .map(|(&(a, b), mut dx_part)| {
             let mut dw = want.weight.then(|| vec![0f32; o * kd]);
+            // bf16: dWᵀ [kd, cout], transposed into dw after the last piece.
+            let mut dwt = (want.weight && bf16).then(|| vec![0f32; kd * o]);
             let mut db = want.bias.then(|| vec![0f32; o]);
             let need_cols = want.weight || want.x;
             let units = s.units(a, b);
@@ -481,18 +497,34 @@ pub fn backward(
                     if let Some(dw) = dw.as_mut() {
                         let cols = &mut cols[..kd * nc];
                         im2col(s, xs, u.n, u.rows, cols);
-                        // dW [cout, kd] += dz [cout, nc] · colsᵀ [nc, kd]
-                        matmul(o, kd, nc, dw, kd, ui > 0, dz, (nc, 1), cols, (1, nc));
+                        if let Some(dwt) = dwt.as_mut() {
+                            // dWᵀ [kd, cout] += cols [kd, nc] · dzᵀ [nc, cout]: the im2col matrix,
+                            // the larger, is AMX's left operand, packed without a transpose.
+                            matmul(kd, o, nc, dwt, (o, 1), ui > 0, cols, (nc, 1), dz, (1, nc));
+                        } else {
+                            // dW [cout, kd] += dz [cout, nc] · colsᵀ [nc, kd]
+                            matmul(o, kd, nc, dw, (kd, 1), ui > 0, dz, (nc, 1), cols, (1, nc));
+                        }
                     }
                     if let Some(dxp) = dx_part.as_deref_mut() {
                         let dcols = &mut cols[..kd * nc];
                         // dcols [kd, nc] = Wᵀ [kd, cout] · dz [cout, nc]
-                        matmul(kd, nc, o, dcols, nc, false, weight, (1, kd), dz, (nc, 1));
+                        match bf16 {
+                            true => matmul(kd, nc, o, dcols, (nc, 1), false, &wt, (o, 1), dz, (nc, 1)),
+                            false => matmul(kd, nc, o, dcols, (nc, 1), false, weight, (1, kd), dz, (nc, 1)),
+                        }
                         let lo = (u.i0 - a) * s.in_len();
                         col2im(s, dcols, u.n, u.rows, &mut dxp[lo..lo + u.n * s.in_len()]);
                     }
                 }
             });
+            if let (Some(dw), Some(dwt)) = (dw.as_mut(), dwt) {
+                for (r, row) in dwt.chunks_exact(o).enumerate() {
+                    for (c, &v) in row.iter().enumerate() {
+                        dw[c * kd + r] = v;
+                    }
+                }
+            }
             (dw, db)
         })
         .collect();

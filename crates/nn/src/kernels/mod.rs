@@ -13,10 +13,17 @@
 //! - [`pool`], [`max_pool2x2`]: 2×2 max-pooling, forward with the argmax and a backward that
 //!   routes the gradient to it (burn's generic pooling was a seventh of an update).
 //!
-//! Limitations: stride 1, square kernels, `f32` only (the default float type).
+//! - [`amx`]: the GEMMs in bfloat16 on Intel AMX, when [`set_matmul_precision`] asks for
+//!   [`MatmulPrecision::Bf16`] (the config's `agent.matmul`); `f32` through the `gemm` crate otherwise.
+//!
+//! Limitations: stride 1, square kernels, `f32` tensors only (the default float type; bf16 is
+//! only the GEMMs' operand rounding).
 
+pub mod amx;
 pub mod gemm_conv;
 pub mod pool;
+
+use std::sync::atomic::{AtomicU8, Ordering};
 
 use burn::backend::TensorMetadata;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
@@ -30,6 +37,84 @@ use burn::tensor::module::conv2d;
 use burn::tensor::ops::ConvOptions;
 use burn::tensor::{DType, Device, Shape, Tensor, TensorData};
 use gemm_conv::{ConvShape, Wanted};
+
+/// How the convolution kernels multiply matrices. Process-wide ([`set_matmul_precision`]): the
+/// kernels run inside burn's autodiff backward, which passes no options.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MatmulPrecision {
+    /// `f32` throughout (the `gemm` crate's kernels). The default.
+    #[default]
+    F32,
+    /// Operands rounded to bfloat16, products accumulated in `f32`, on Intel AMX ([`amx`]): about
+    /// 3 significant digits per operand instead of 7, several times faster on CPUs that have AMX.
+    Bf16,
+}
+
+impl MatmulPrecision {
+    /// The names [`MatmulPrecision::parse`] takes.
+    pub const CHOICES: &str = "`f32` (the default) or `bf16` (Intel AMX)";
+
+    /// `f32` or `bf16` (case-insensitive).
+    pub fn parse(name: &str) -> Option<Self> {
+        match name.trim().to_ascii_lowercase().as_str() {
+            "f32" => Some(MatmulPrecision::F32),
+            "bf16" => Some(MatmulPrecision::Bf16),
+            _ => None,
+        }
+    }
+
+    /// The name [`MatmulPrecision::parse`] reads back.
+    pub fn name(self) -> &'static str {
+        match self {
+            MatmulPrecision::F32 => "f32",
+            MatmulPrecision::Bf16 => "bf16",
+        }
+    }
+
+    /// True for the default, `f32` (for `skip_serializing_if`).
+    pub fn is_f32(&self) -> bool {
+        *self == MatmulPrecision::F32
+    }
+
+    /// Whether this machine can run it: `bf16` needs AMX ([`amx::available`]).
+    pub fn supported(self) -> Result<(), String> {
+        match self {
+            MatmulPrecision::F32 => Ok(()),
+            MatmulPrecision::Bf16 if amx::available() => Ok(()),
+            MatmulPrecision::Bf16 => Err(
+                "bf16 needs Intel AMX (Xeon Sapphire Rapids or later, Linux 5.16 or later), which this machine does not offer: use f32"
+                    .into(),
+            ),
+        }
+    }
+}
+
+impl std::str::FromStr for MatmulPrecision {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        MatmulPrecision::parse(s).ok_or_else(|| format!("unknown precision `{s}`: use {}", MatmulPrecision::CHOICES))
+    }
+}
+
+static PRECISION: AtomicU8 = AtomicU8::new(0);
+
+/// Sets how every convolution of this process multiplies matrices from now on; refuses `bf16`
+/// where AMX is missing (the setting stays as it was).
+pub fn set_matmul_precision(p: MatmulPrecision) -> Result<(), String> {
+    p.supported()?;
+    PRECISION.store(p as u8, Ordering::Relaxed);
+    Ok(())
+}
+
+/// The precision [`set_matmul_precision`] last set (`f32` until then).
+pub fn matmul_precision() -> MatmulPrecision {
+    match PRECISION.load(Ordering::Relaxed) {
+        0 => MatmulPrecision::F32,
+        _ => MatmulPrecision::Bf16,
+    }
+}
 
 /// The custom op, routed by burn's dispatch to `Flex` or `Autodiff<Flex>`.
 #[backend_extension(Flex, Autodiff)]
