@@ -72,8 +72,8 @@ pub struct Where {
     /// The grid file (default: experiments/NAME.toml).
     #[arg(long)]
     pub file: Option<PathBuf>,
-    /// The directory of the runs (default: runs/experiments, shared by the grids: runs they have in
-    /// common are made once).
+    /// The directory of the runs (default: the grid file's `runs`, else runs/experiments, shared by
+    /// the grids: runs they have in common are made once).
     #[arg(long)]
     pub runs: Option<PathBuf>,
     /// Where the reports are: each report's runs.json archives its finished runs, which count as
@@ -90,8 +90,8 @@ impl Where {
         Ok(g)
     }
 
-    fn runs(&self) -> PathBuf {
-        self.runs.clone().unwrap_or_else(|| PathBuf::from("runs/experiments"))
+    fn runs(&self, grid: &Grid) -> PathBuf {
+        self.runs.clone().or_else(|| grid.runs.clone()).unwrap_or_else(|| PathBuf::from("runs/experiments"))
     }
 
     /// The command that regenerates the report, as the report quotes it.
@@ -122,7 +122,7 @@ pub fn run(cmd: ExperimentCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
     match cmd {
         ExperimentCommand::Run { at, parallel, threads, report, out } => {
             let grid = at.grid()?;
-            let runs = at.runs();
+            let runs = at.runs(&grid);
             let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
             let opts = RunnerOptions {
                 exe: std::env::current_exe()
@@ -160,7 +160,7 @@ pub fn run(cmd: ExperimentCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
         }
         ExperimentCommand::Status { at } => {
             let grid = at.grid()?;
-            let runs = at.runs();
+            let runs = at.runs(&grid);
             let archive = crate::report::read_archives(&at.archive)?;
             let (mut done, mut partial, mut new) = (0, 0, 0);
             for cell in grid.cells() {
@@ -203,7 +203,7 @@ pub fn run(cmd: ExperimentCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
             let grid = at.grid()?;
             let out = out.unwrap_or_else(|| default_out(&at.name));
             let archive = crate::report::read_archives(&at.archive)?;
-            for f in crate::report::write(&grid, &at.runs(), &archive, &out, &at.report_command(&out))? {
+            for f in crate::report::write(&grid, &at.runs(&grid), &archive, &out, &at.report_command(&out))? {
                 println!("{}", f.display());
             }
             Ok(0)

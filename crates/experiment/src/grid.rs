@@ -11,6 +11,7 @@
 //! seeds = [0, 1]
 //! heldout_episodes = 100                # the final held-out evaluation of each run
 //! checkpoint_minutes = 10               # a checkpoint at least this often (besides checkpoint_every)
+//! runs = "runs/my_grid"                 # its own runs directory (default: runs/experiments, shared)
 //!
 //! [updates]                             # total_updates per task (default: the preset's)
 //! block_in_bowl = 10000
@@ -85,6 +86,8 @@ struct GridFile {
     #[serde(default = "default_checkpoint_minutes")]
     checkpoint_minutes: f64,
     #[serde(default)]
+    runs: Option<PathBuf>,
+    #[serde(default)]
     updates: BTreeMap<String, u64>,
     #[serde(default)]
     config: toml::Table,
@@ -153,6 +156,9 @@ pub struct Grid {
     pub heldout_episodes: usize,
     /// Checkpoint interval in minutes of training.
     pub checkpoint_minutes: f64,
+    /// Its own runs directory, for a grid whose cells share names but not configs with other
+    /// grids' (default: `runs/experiments`, shared by the grids).
+    pub runs: Option<PathBuf>,
     /// The paper's figure per `task/variant` (discounted return), for the report.
     pub paper: BTreeMap<String, f64>,
     cells: Vec<Cell>,
@@ -244,6 +250,7 @@ impl Grid {
             preset,
             heldout_episodes: f.heldout_episodes,
             checkpoint_minutes: f.checkpoint_minutes,
+            runs: f.runs,
             paper: f.paper,
             cells,
             updates: f.updates,
@@ -331,6 +338,11 @@ mod tests {
         assert_eq!(g.config(&g.cells()[4]).unwrap().total_updates, 10_000);
         // the rest is the preset's
         assert_eq!(cfg.batch_size, TrainConfig::reduced16("block_pulling").batch_size);
+        assert_eq!(g.runs, None, "shared runs directory by default");
+        assert!(cfg.agent.matmul.is_f32());
+        let own = parse(&format!("{BASE}runs = \"runs/own\"\n[config]\nagent = {{ matmul = \"bf16\" }}\n")).unwrap();
+        assert_eq!(own.runs, Some(PathBuf::from("runs/own")));
+        assert_eq!(own.config(&own.cells()[0]).unwrap().agent.matmul.name(), "bf16");
     }
 
     #[test]

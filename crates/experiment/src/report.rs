@@ -52,9 +52,13 @@ pub struct Archived {
 /// The archive file a report writes beside its README.md.
 pub const ARCHIVE_FILE: &str = "runs.json";
 
+/// Every archived run, by run directory: several where grids with their own runs directories
+/// (`runs` in the grid file) have runs of the same name and different configs.
+pub type Archive = BTreeMap<PathBuf, Vec<Archived>>;
+
 /// Finished runs archived by earlier reports: every `DIR/*/runs.json`, by run directory (a missing
 /// `DIR` is an empty archive).
-pub fn read_archives(dir: &Path) -> Result<BTreeMap<PathBuf, Archived>> {
+pub fn read_archives(dir: &Path) -> Result<Archive> {
     let mut out = BTreeMap::new();
     if !dir.is_dir() {
         return Ok(out);
@@ -70,19 +74,19 @@ pub fn read_archives(dir: &Path) -> Result<BTreeMap<PathBuf, Archived>> {
         let runs: Vec<Archived> = serde_json::from_slice(&text)
             .map_err(|e| ExperimentError::Io { path: f.clone(), message: format!("not a run archive: {e}") })?;
         for a in runs {
-            out.insert(a.run.clone(), a);
+            out.entry(a.run.clone()).or_insert_with(Vec::new).push(a);
         }
     }
     Ok(out)
 }
 
 /// The archived run of `cell`, if the archive has it with the config the grid gives now.
-pub fn archived<'a>(archive: &'a BTreeMap<PathBuf, Archived>, cell: &Cell, cfg: &TrainConfig) -> Option<&'a Archived> {
-    archive.get(&cell.rel_dir()).filter(|a| &a.config == cfg)
+pub fn archived<'a>(archive: &'a Archive, cell: &Cell, cfg: &TrainConfig) -> Option<&'a Archived> {
+    archive.get(&cell.rel_dir())?.iter().find(|a| &a.config == cfg)
 }
 
 /// Every cell of `grid` with a directory below `runs` or a finished run in `archive`.
-pub fn collect(grid: &Grid, runs: &Path, archive: &BTreeMap<PathBuf, Archived>) -> Result<Vec<RunView>> {
+pub fn collect(grid: &Grid, runs: &Path, archive: &Archive) -> Result<Vec<RunView>> {
     let mut out = Vec::new();
     for cell in grid.cells() {
         let dir = runs.join(cell.rel_dir());
@@ -127,13 +131,7 @@ type GroupKey = (String, String, String);
 /// Writes `OUT/README.md`, the figures and the archive of the finished runs (`OUT/runs.json`);
 /// returns the files written. Runs are taken from `runs`, and from `archive` where `runs` does not
 /// have them finished.
-pub fn write(
-    grid: &Grid,
-    runs: &Path,
-    archive: &BTreeMap<PathBuf, Archived>,
-    out: &Path,
-    command: &str,
-) -> Result<Vec<PathBuf>> {
+pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &str) -> Result<Vec<PathBuf>> {
     let views = collect(grid, runs, archive)?;
     std::fs::create_dir_all(out).map_err(io(out))?;
     let mut files = Vec::new();
@@ -297,7 +295,7 @@ fn relative_link(from_dir: &Path, to: &Path) -> String {
 }
 
 /// Whether every run of `grid` is finished, below `runs` or in `archive`.
-pub fn all_finished(grid: &Grid, runs: &Path, archive: &BTreeMap<PathBuf, Archived>) -> Result<bool> {
+pub fn all_finished(grid: &Grid, runs: &Path, archive: &Archive) -> Result<bool> {
     for c in grid.cells() {
         let cfg = grid.config(c)?;
         if !runs.join(c.rel_dir()).join(RESULT_FILE).is_file() && archived(archive, c, &cfg).is_none() {

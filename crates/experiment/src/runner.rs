@@ -208,7 +208,7 @@ struct Running {
 pub fn run(
     grid: &Grid,
     runs: &Path,
-    archive: &std::collections::BTreeMap<PathBuf, crate::report::Archived>,
+    archive: &crate::report::Archive,
     opts: &RunnerOptions,
     stop: &dyn Fn() -> bool,
 ) -> Result<RunnerSummary> {

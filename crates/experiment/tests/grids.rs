@@ -16,17 +16,19 @@ fn every_grid_reads_and_shared_runs_agree() {
         .collect();
     files.sort();
     assert!(files.len() >= 4, "{files:?}");
-    let mut seen: BTreeMap<PathBuf, (String, String)> = BTreeMap::new();
+    // Keyed by (runs directory, run directory): a grid with its own `runs` shares nothing.
+    let mut seen: BTreeMap<(Option<PathBuf>, PathBuf), (String, String)> = BTreeMap::new();
     let mut shared = 0;
     for f in &files {
         let g = Grid::read(f).unwrap_or_else(|e| panic!("{e}"));
         for c in g.cells() {
             let cfg = serde_json::to_string(&g.config(c).unwrap()).unwrap();
-            if let Some((other, other_cfg)) = seen.get(&c.rel_dir()) {
+            let key = (g.runs.clone(), c.rel_dir());
+            if let Some((other, other_cfg)) = seen.get(&key) {
                 assert_eq!(&cfg, other_cfg, "{} differs between {other} and {}", c.rel_dir().display(), g.name);
                 shared += 1;
             } else {
-                seen.insert(c.rel_dir(), (g.name.clone(), cfg));
+                seen.insert(key, (g.name.clone(), cfg));
             }
         }
     }

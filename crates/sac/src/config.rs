@@ -272,9 +272,6 @@ impl TrainConfig {
                 ),
             );
         }
-        if let Err(e) = self.agent.matmul.supported() {
-            return err("agent.matmul", e);
-        }
         if !(self.agent.lr > 0.0 && self.agent.lr.is_finite()) {
             return err("agent.lr", format!("{} must be positive", self.agent.lr));
         }
