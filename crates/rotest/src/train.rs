@@ -88,7 +88,8 @@ pub struct TrainConfig {
     /// Seed of the split, the initial weights, the batch order and the crops.
     pub seed: u64,
     /// Precision of the convolutions' matrix products: `f32` (the paper's) or `bf16` (Intel AMX,
-    /// docs/backends.md). Process-wide: [`run`] sets it.
+    /// docs/backends.md). Process-wide: [`run`] sets it, and refuses `bf16` on a machine without
+    /// AMX (the config itself is valid anywhere, so a report reads it anywhere).
     #[serde(default, skip_serializing_if = "MatmulPrecision::is_f32")]
     pub matmul: MatmulPrecision,
 }
@@ -148,9 +149,6 @@ impl TrainConfig {
         }
         if self.batch == 0 {
             return bad("--batch", "must be at least 1".into());
-        }
-        if let Err(e) = self.matmul.supported() {
-            return bad("--matmul", e);
         }
         if self.max_epochs == 0 || self.min_epochs > self.max_epochs {
             return bad(
