@@ -282,81 +282,60 @@ unsafe fn tile_gemm(mp: usize, np: usize, kp: usize, a: &[u16], b: &[u16], c: &m
                 let b0 = b.as_ptr().add(2 * j);
                 let b1 = b0.add(2 * T);
                 asm!("tilezero tmm0", "tilezero tmm1", "tilezero tmm2", "tilezero tmm3", options(nostack, nomem));
-                let mut kk = 0;
+                // The inner loop over the inner dimension, 32 values a step, for the tiles given.
+                macro_rules! steps {
+                    ($kk:ident; $($line:literal),+; $($op:ident = $ptr:expr),+) => {{
+                        let mut $kk = 0;
+                        while $kk < kp {
+                            asm!(
+                                $($line),+,
+                                $($op = in(reg) $ptr),+,
+                                sa = in(reg) a_stride,
+                                sb = in(reg) b_stride,
+                                options(nostack, readonly),
+                            );
+                            $kk += TK;
+                        }
+                    }};
+                }
                 match (two_m, two_n) {
-                    (true, true) => {
-                        while kk < kp {
-                            asm!(
-                                "tileloadd tmm4, [{a0} + {sa}]",
-                                "tileloadd tmm6, [{b0} + {sb}]",
-                                "tileloadd tmm7, [{b1} + {sb}]",
-                                "tdpbf16ps tmm0, tmm4, tmm6",
-                                "tileloadd tmm5, [{a1} + {sa}]",
-                                "tdpbf16ps tmm1, tmm4, tmm7",
-                                "tdpbf16ps tmm2, tmm5, tmm6",
-                                "tdpbf16ps tmm3, tmm5, tmm7",
-                                a0 = in(reg) a0.add(kk),
-                                a1 = in(reg) a1.add(kk),
-                                b0 = in(reg) b0.add(kk * np),
-                                b1 = in(reg) b1.add(kk * np),
-                                sa = in(reg) a_stride,
-                                sb = in(reg) b_stride,
-                                options(nostack, readonly),
-                            );
-                            kk += TK;
-                        }
-                    }
-                    (true, false) => {
-                        while kk < kp {
-                            asm!(
-                                "tileloadd tmm4, [{a0} + {sa}]",
-                                "tileloadd tmm6, [{b0} + {sb}]",
-                                "tdpbf16ps tmm0, tmm4, tmm6",
-                                "tileloadd tmm5, [{a1} + {sa}]",
-                                "tdpbf16ps tmm2, tmm5, tmm6",
-                                a0 = in(reg) a0.add(kk),
-                                a1 = in(reg) a1.add(kk),
-                                b0 = in(reg) b0.add(kk * np),
-                                sa = in(reg) a_stride,
-                                sb = in(reg) b_stride,
-                                options(nostack, readonly),
-                            );
-                            kk += TK;
-                        }
-                    }
-                    (false, true) => {
-                        while kk < kp {
-                            asm!(
-                                "tileloadd tmm4, [{a0} + {sa}]",
-                                "tileloadd tmm6, [{b0} + {sb}]",
-                                "tileloadd tmm7, [{b1} + {sb}]",
-                                "tdpbf16ps tmm0, tmm4, tmm6",
-                                "tdpbf16ps tmm1, tmm4, tmm7",
-                                a0 = in(reg) a0.add(kk),
-                                b0 = in(reg) b0.add(kk * np),
-                                b1 = in(reg) b1.add(kk * np),
-                                sa = in(reg) a_stride,
-                                sb = in(reg) b_stride,
-                                options(nostack, readonly),
-                            );
-                            kk += TK;
-                        }
-                    }
-                    (false, false) => {
-                        while kk < kp {
-                            asm!(
-                                "tileloadd tmm4, [{a0} + {sa}]",
-                                "tileloadd tmm6, [{b0} + {sb}]",
-                                "tdpbf16ps tmm0, tmm4, tmm6",
-                                a0 = in(reg) a0.add(kk),
-                                b0 = in(reg) b0.add(kk * np),
-                                sa = in(reg) a_stride,
-                                sb = in(reg) b_stride,
-                                options(nostack, readonly),
-                            );
-                            kk += TK;
-                        }
-                    }
+                    (true, true) => steps!(
+                        kk;
+                        "tileloadd tmm4, [{a0} + {sa}]",
+                        "tileloadd tmm6, [{b0} + {sb}]",
+                        "tileloadd tmm7, [{b1} + {sb}]",
+                        "tdpbf16ps tmm0, tmm4, tmm6",
+                        "tileloadd tmm5, [{a1} + {sa}]",
+                        "tdpbf16ps tmm1, tmm4, tmm7",
+                        "tdpbf16ps tmm2, tmm5, tmm6",
+                        "tdpbf16ps tmm3, tmm5, tmm7";
+                        a0 = a0.add(kk), a1 = a1.add(kk), b0 = b0.add(kk * np), b1 = b1.add(kk * np)
+                    ),
+                    (true, false) => steps!(
+                        kk;
+                        "tileloadd tmm4, [{a0} + {sa}]",
+                        "tileloadd tmm6, [{b0} + {sb}]",
+                        "tdpbf16ps tmm0, tmm4, tmm6",
+                        "tileloadd tmm5, [{a1} + {sa}]",
+                        "tdpbf16ps tmm2, tmm5, tmm6";
+                        a0 = a0.add(kk), a1 = a1.add(kk), b0 = b0.add(kk * np)
+                    ),
+                    (false, true) => steps!(
+                        kk;
+                        "tileloadd tmm4, [{a0} + {sa}]",
+                        "tileloadd tmm6, [{b0} + {sb}]",
+                        "tileloadd tmm7, [{b1} + {sb}]",
+                        "tdpbf16ps tmm0, tmm4, tmm6",
+                        "tdpbf16ps tmm1, tmm4, tmm7";
+                        a0 = a0.add(kk), b0 = b0.add(kk * np), b1 = b1.add(kk * np)
+                    ),
+                    (false, false) => steps!(
+                        kk;
+                        "tileloadd tmm4, [{a0} + {sa}]",
+                        "tileloadd tmm6, [{b0} + {sb}]",
+                        "tdpbf16ps tmm0, tmm4, tmm6";
+                        a0 = a0.add(kk), b0 = b0.add(kk * np)
+                    ),
                 }
                 let c00 = c.as_mut_ptr().add(i * np + j);
                 asm!("tilestored [{c} + {s}], tmm0", c = in(reg) c00, s = in(reg) c_stride, options(nostack));
