@@ -74,9 +74,10 @@ fn round_up(x: usize, to: usize) -> usize {
 }
 
 thread_local! {
-    /// Packed left operand, packed right operand, and the padded `f32` result, per thread.
-    static BUFS: std::cell::RefCell<(Vec<u16>, Vec<u16>, Vec<f32>)> =
-        const { std::cell::RefCell::new((Vec::new(), Vec::new(), Vec::new())) };
+    /// The packed left operand of [`matmul`], per thread.
+    static LHS: std::cell::RefCell<Vec<u16>> = const { std::cell::RefCell::new(Vec::new()) };
+    /// Packed right operand and the padded `f32` result, per thread.
+    static BUFS: std::cell::RefCell<(Vec<u16>, Vec<f32>)> = const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
 }
 
 /// `lhs` (`m×k`, strides `(rs, cs)`) as bf16 row-major `[mp, kp]`, zero-padded.
@@ -362,6 +363,37 @@ unsafe fn tile_gemm(_: usize, _: usize, _: usize, _: &[u16], _: &[u16], _: &mut 
     unreachable!("AMX is x86_64 only");
 }
 
+/// A left operand packed once for several products (a convolution's weights, the same for every
+/// piece of a batch).
+#[derive(Clone, Debug)]
+pub struct PackedLhs {
+    m: usize,
+    k: usize,
+    data: Vec<u16>,
+}
+
+impl PackedLhs {
+    /// `lhs` (`m×k`, strides `(rs, cs)` in floats) packed for [`matmul_packed`].
+    ///
+    /// # Panics
+    /// When a stride reaches outside `lhs`.
+    pub fn new(m: usize, k: usize, lhs: &[f32], strides: (usize, usize)) -> Self {
+        Self::new_in(Vec::new(), m, k, lhs, strides)
+    }
+
+    /// [`PackedLhs::new`] in the storage of `data` (its contents are overwritten).
+    fn new_in(mut data: Vec<u16>, m: usize, k: usize, lhs: &[f32], strides: (usize, usize)) -> Self {
+        if m > 0 && k > 0 {
+            assert!((m - 1) * strides.0 + (k - 1) * strides.1 < lhs.len(), "amx lhs out of bounds");
+        }
+        let (mp, kp) = (round_up(m.max(1), T), round_up(k.max(1), TK));
+        data.resize(mp * kp, 0);
+        data.truncate(mp * kp);
+        pack_lhs(m, k, lhs, strides, kp, &mut data);
+        PackedLhs { m, k, data }
+    }
+}
+
 /// `dst (m×n) = [dst +] lhs (m×k) · rhs (k×n)` in bf16 with `f32` accumulation, strides in floats
 /// as [`crate::kernels::gemm_conv`]'s GEMM takes them.
 ///
@@ -373,39 +405,56 @@ pub fn matmul(
     n: usize,
     k: usize,
     dst: &mut [f32],
-    (dst_rs, dst_cs): (usize, usize),
+    dst_strides: (usize, usize),
     accumulate: bool,
     lhs: &[f32],
     lhs_strides: (usize, usize),
     rhs: &[f32],
     rhs_strides: (usize, usize),
 ) {
+    // The packed operand's storage is this thread's, kept between calls.
+    let buf = LHS.with(|cell| std::mem::take(&mut *cell.borrow_mut()));
+    let a = PackedLhs::new_in(buf, m, k, lhs, lhs_strides);
+    matmul_packed(&a, n, dst, dst_strides, accumulate, rhs, rhs_strides);
+    LHS.with(|cell| *cell.borrow_mut() = a.data);
+}
+
+/// [`matmul`] with a left operand packed beforehand.
+///
+/// # Panics
+/// When AMX is not [`available`], or a stride reaches outside its slice.
+pub fn matmul_packed(
+    a: &PackedLhs,
+    n: usize,
+    dst: &mut [f32],
+    (dst_rs, dst_cs): (usize, usize),
+    accumulate: bool,
+    rhs: &[f32],
+    rhs_strides: (usize, usize),
+) {
     assert!(available(), "AMX bf16 GEMM called on a CPU or kernel without AMX");
+    let (m, k) = (a.m, a.k);
     if m == 0 || n == 0 {
         return;
     }
     assert!((m - 1) * dst_rs + (n - 1) * dst_cs < dst.len(), "amx dst out of bounds");
     if k > 0 {
-        assert!((m - 1) * lhs_strides.0 + (k - 1) * lhs_strides.1 < lhs.len(), "amx lhs out of bounds");
         assert!((k - 1) * rhs_strides.0 + (n - 1) * rhs_strides.1 < rhs.len(), "amx rhs out of bounds");
     }
     let (mp, np, kp) = (round_up(m, T), round_up(n, T), round_up(k.max(1), TK));
     BUFS.with(|cell| {
         let mut bufs = cell.borrow_mut();
-        let (a, b, c) = &mut *bufs;
-        for (v, len) in [(&mut *a, mp * kp), (&mut *b, kp * np)] {
-            if v.len() < len {
-                v.resize(len, 0);
-            }
+        let (b, c) = &mut *bufs;
+        if b.len() < kp * np {
+            b.resize(kp * np, 0);
         }
         if c.len() < mp * np {
             c.resize(mp * np, 0.0);
         }
-        let (a, b, c) = (&mut a[..mp * kp], &mut b[..kp * np], &mut c[..mp * np]);
-        pack_lhs(m, k, lhs, lhs_strides, kp, a);
+        let (b, c) = (&mut b[..kp * np], &mut c[..mp * np]);
         pack_rhs(k, n, rhs, rhs_strides, np, b);
         // SAFETY: available() was asserted; the buffers have the sizes tile_gemm reads and writes.
-        unsafe { tile_gemm(mp, np, kp, a, b, c) };
+        unsafe { tile_gemm(mp, np, kp, &a.data, b, c) };
         for r in 0..m {
             let src = &c[r * np..][..n];
             if dst_cs == 1 {
@@ -493,6 +542,13 @@ mod tests {
                     let mut dst: Vec<f32> = (0..len).map(|i| i as f32 * 0.5).collect();
                     let before = dst.clone();
                     matmul(m, n, k, &mut dst, ds, accumulate, &lhs, ls, &rhs, rs);
+                    // The same product with the left operand packed beforehand, used twice.
+                    let packed = PackedLhs::new(m, k, &lhs, ls);
+                    for _ in 0..2 {
+                        let mut again = before.clone();
+                        matmul_packed(&packed, n, &mut again, ds, accumulate, &rhs, rs);
+                        assert_eq!(again, dst, "({m}, {n}, {k}) {ls:?} {rs:?} {ds:?}: packed beforehand");
+                    }
                     for (i, (&got, &was)) in dst.iter().zip(&before).enumerate() {
                         let (r, c) = if transposed { (i % (m + 2), i / (m + 2)) } else { (i / (n + 2), i % (n + 2)) };
                         let (got, was) = (got as f64, was as f64);

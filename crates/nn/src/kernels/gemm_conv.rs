@@ -263,9 +263,10 @@ fn col2im(s: &ConvShape, cols: &[f32], n: usize, rows: (usize, usize), dx: &mut 
 }
 
 /// `dst (m×n) = [dst +] lhs (m×k) · rhs (k×n)` with explicit row and column strides (in floats), in
-/// the process's [`super::MatmulPrecision`].
+/// the process's [`super::MatmulPrecision`]; in bf16, `packed` (when given) is `lhs` already packed.
 #[allow(clippy::too_many_arguments)]
 fn matmul(
+    packed: Option<&super::amx::PackedLhs>,
     m: usize,
     n: usize,
     k: usize,
@@ -292,7 +293,21 @@ fn matmul(
     }
     FLOPS.fetch_add(2 * (m * n * k) as u64, Ordering::Relaxed);
     if super::matmul_precision() == super::MatmulPrecision::Bf16 {
-        super::amx::matmul(m, n, k, dst, (dst_rs, dst_cs), accumulate, lhs, (lhs_rs, lhs_cs), rhs, (rhs_rs, rhs_cs));
+        match packed {
+            Some(a) => super::amx::matmul_packed(a, n, dst, (dst_rs, dst_cs), accumulate, rhs, (rhs_rs, rhs_cs)),
+            None => super::amx::matmul(
+                m,
+                n,
+                k,
+                dst,
+                (dst_rs, dst_cs),
+                accumulate,
+                lhs,
+                (lhs_rs, lhs_cs),
+                rhs,
+                (rhs_rs, rhs_cs),
+            ),
+        }
         return;
     }
     // The largest element each operand's strides reach must lie inside its slice.
@@ -337,6 +352,9 @@ pub fn forward(s: &ConvShape, x: &[f32], weight: &[f32], bias: &[f32], relu: boo
     assert_eq!(y.len(), s.batch * s.out_len(), "conv output length");
     let (kd, p, o, wo) = (s.kdim(), s.out_pixels(), s.cout, s.out_w());
     let ranges = thread_ranges(s.batch);
+    // bf16: the weights packed once for every piece.
+    let packed = (super::matmul_precision() == super::MatmulPrecision::Bf16)
+        .then(|| super::amx::PackedLhs::new(o, kd, weight, (kd, 1)));
     // Hand each thread the output rows of its range.
     let mut parts: Vec<(usize, usize, &mut [f32])> = Vec::with_capacity(ranges.len());
     let mut rest = y;
@@ -365,13 +383,13 @@ pub fn forward(s: &ConvShape, x: &[f32], weight: &[f32], bias: &[f32], relu: boo
                     // One sample's rows: [cout, rows·W'] is a strided block of its NCHW output.
                     let ys = &mut ypart[(u.i0 - a) * s.out_len()..][..s.out_len()];
                     let off = u.rows.0 * wo;
-                    matmul(o, nc, kd, &mut ys[off..], (p, 1), false, weight, (kd, 1), cols, (nc, 1));
+                    matmul(packed.as_ref(), o, nc, kd, &mut ys[off..], (p, 1), false, weight, (kd, 1), cols, (nc, 1));
                     for (oc, &bv) in bias.iter().enumerate() {
                         act(&mut ys[oc * p + off..][..nc], bv);
                     }
                 } else {
                     let out = &mut out[..o * nc];
-                    matmul(o, nc, kd, out, (nc, 1), false, weight, (kd, 1), cols, (nc, 1));
+                    matmul(packed.as_ref(), o, nc, kd, out, (nc, 1), false, weight, (kd, 1), cols, (nc, 1));
                     // Scatter [cout, n·P] into NCHW with bias (and ReLU).
                     for i in 0..u.n {
                         let ys = &mut ypart[(u.i0 - a + i) * s.out_len()..][..s.out_len()];
@@ -449,12 +467,8 @@ pub fn backward(
         None => dx_parts.extend(ranges.iter().map(|_| None)),
     }
     let bf16 = super::matmul_precision() == super::MatmulPrecision::Bf16;
-    // In bf16 the input gradient's left operand Wᵀ is packed once per piece: transposed here once,
-    // its packing is a contiguous conversion.
-    let wt: Vec<f32> = match bf16 && want.x {
-        true => (0..kd).flat_map(|r| (0..o).map(move |c| weight[c * kd + r])).collect(),
-        false => Vec::new(),
-    };
+    // bf16: the input gradient's left operand Wᵀ packed once for every piece.
+    let packed_wt = (bf16 && want.x).then(|| super::amx::PackedLhs::new(kd, o, weight, (1, kd)));
     // Per thread: its partial weight and bias gradients.
     type Partial = (Option<Vec<f32>>, Option<Vec<f32>>);
     let partials: Vec<Partial> = ranges
@@ -500,19 +514,16 @@ pub fn backward(
                         if let Some(dwt) = dwt.as_mut() {
                             // dWᵀ [kd, cout] += cols [kd, nc] · dzᵀ [nc, cout]: the im2col matrix,
                             // the larger, is AMX's left operand, packed without a transpose.
-                            matmul(kd, o, nc, dwt, (o, 1), ui > 0, cols, (nc, 1), dz, (1, nc));
+                            matmul(None, kd, o, nc, dwt, (o, 1), ui > 0, cols, (nc, 1), dz, (1, nc));
                         } else {
                             // dW [cout, kd] += dz [cout, nc] · colsᵀ [nc, kd]
-                            matmul(o, kd, nc, dw, (kd, 1), ui > 0, dz, (nc, 1), cols, (1, nc));
+                            matmul(None, o, kd, nc, dw, (kd, 1), ui > 0, dz, (nc, 1), cols, (1, nc));
                         }
                     }
                     if let Some(dxp) = dx_part.as_deref_mut() {
                         let dcols = &mut cols[..kd * nc];
                         // dcols [kd, nc] = Wᵀ [kd, cout] · dz [cout, nc]
-                        match bf16 {
-                            true => matmul(kd, nc, o, dcols, (nc, 1), false, &wt, (o, 1), dz, (nc, 1)),
-                            false => matmul(kd, nc, o, dcols, (nc, 1), false, weight, (1, kd), dz, (nc, 1)),
-                        }
+                        matmul(packed_wt.as_ref(), kd, nc, o, dcols, (nc, 1), false, weight, (1, kd), dz, (nc, 1));
                         let lo = (u.i0 - a) * s.in_len();
                         col2im(s, dcols, u.n, u.rows, &mut dxp[lo..lo + u.n * s.in_len()]);
                     }
