@@ -3,10 +3,11 @@
 //!
 //! The operands are rounded to bfloat16 (round to nearest even: 8 significant bits, `f32`'s
 //! exponent range) and multiplied with `f32` accumulation, as PyTorch's bf16 autocast does on the
-//! same CPUs. Each call packs the left operand row-major `[M', K']` and the right one in AMX's pair
-//! layout `[K'/2, N', 2]` (`M'`, `N'` rounded up to 16, `K'` to 32, zero-padded), multiplies 32×32
-//! blocks with four accumulator tiles, and adds or writes the result into the strided
-//! destination. Buffers are per thread and kept between calls.
+//! same CPUs. Each call packs the left operand row-major `[M', K']` (or takes it packed beforehand,
+//! [`PackedLhs`]: a convolution's weights, once for all the pieces of a batch) and the right one in
+//! AMX's pair layout `[K'/2, N', 2]` (`M'`, `N'` rounded up to 16, `K'` to 32, zero-padded), with
+//! AVX-512 BF16 conversions, multiplies 32×32 blocks with four accumulator tiles, and adds or
+//! writes the result into the strided destination. Buffers are per thread and kept between calls.
 //!
 //! AMX needs the CPU (Sapphire Rapids or later: `CPUID.(7,0):EDX` bits 22 and 24) and the Linux
 //! kernel's permission for the tile state (`arch_prctl(ARCH_REQ_XCOMP_PERM, XTILEDATA)`, Linux
