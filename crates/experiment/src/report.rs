@@ -310,6 +310,47 @@ mod tests {
     use super::*;
 
     #[test]
+    fn archives_keep_runs_of_one_name_with_different_configs_apart() {
+        let cell = Cell {
+            task: "block_pulling".into(),
+            variant: "equi".into(),
+            view: "side".into(),
+            corruption: "none".into(),
+            seed: 0,
+        };
+        let f32_cfg = TrainConfig::reduced16("block_pulling");
+        let mut bf16_cfg = f32_cfg.clone();
+        bf16_cfg.agent.matmul = serde_json::from_str("\"bf16\"").unwrap();
+        let run = |config: &TrainConfig, success_rate: f64| Archived {
+            run: cell.rel_dir(),
+            config: config.clone(),
+            evals: Vec::new(),
+            result: RunResult {
+                updates: 5000,
+                env_steps: 25_000,
+                train_seconds: 1.0,
+                last_eval: None,
+                heldout: EvalResult { updates: 5000, episodes: 100, success_rate, ..EvalResult::default() },
+                heldout_seconds: 1.0,
+            },
+        };
+        let dir = std::env::temp_dir().join(format!("equiarm_archives_{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        for (grid, a) in [("tasks", run(&f32_cfg, 0.8)), ("bf16_check", run(&bf16_cfg, 0.7))] {
+            std::fs::create_dir_all(dir.join(grid)).unwrap();
+            std::fs::write(dir.join(grid).join(ARCHIVE_FILE), serde_json::to_vec(&[a]).unwrap()).unwrap();
+        }
+        let archive = read_archives(&dir).unwrap();
+        assert_eq!(archive[&cell.rel_dir()].len(), 2);
+        assert_eq!(archived(&archive, &cell, &f32_cfg).unwrap().result.heldout.success_rate, 0.8);
+        assert_eq!(archived(&archive, &cell, &bf16_cfg).unwrap().result.heldout.success_rate, 0.7);
+        let mut other = f32_cfg.clone();
+        other.seed = 9;
+        assert!(archived(&archive, &cell, &other).is_none());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
     fn links_are_relative_to_the_report() {
         assert_eq!(
             relative_link(Path::new("docs/results/tasks"), Path::new("experiments/tasks.toml")),
