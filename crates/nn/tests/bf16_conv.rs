@@ -3,19 +3,13 @@
 //! rounding, on shapes that take each of the kernels' paths (batched small maps, bands of rows of a
 //! large one, 1×1 and 3×3, odd sizes). One test in its own binary: the precision is process-wide.
 
+use equiarm_nn::init::Init;
 use equiarm_nn::kernels::gemm_conv::{self, ConvShape, Wanted};
 use equiarm_nn::kernels::{MatmulPrecision, set_matmul_precision};
 
+/// `n` values from the project's seeded initialiser (uniform in [−1, 1]).
 fn values(n: usize, seed: u64) -> Vec<f32> {
-    let mut s = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
-    (0..n)
-        .map(|_| {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        })
-        .collect()
+    Init::new(seed).uniform("bf16_conv", n, 1.0)
 }
 
 /// ‖a − b‖ / ‖b‖.

@@ -522,19 +522,13 @@ mod tests {
             eprintln!("no AMX on this machine: the tile GEMM is not run (the packing tests still are)");
             return;
         }
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
+        let init = crate::init::Init::new(7);
         // Shapes below, at and above the 16 / 32 tile edges, and k below one tile step.
         for &(m, n, k) in
             &[(1, 1, 1), (16, 16, 32), (17, 33, 31), (32, 32, 64), (48, 20, 100), (5, 70, 300), (64, 144, 37)]
         {
-            let lhs: Vec<f32> = (0..m * k + 3).map(|_| next()).collect();
-            let rhs: Vec<f32> = (0..k * n + 3).map(|_| next()).collect();
+            let lhs = init.uniform(&format!("lhs{m}x{k}"), m * k + 3, 1.0);
+            let rhs = init.uniform(&format!("rhs{k}x{n}"), k * n + 3, 1.0);
             for (ls, rs) in [((k, 1), (n, 1)), ((1, m), (1, k)), ((k, 1), (1, k))] {
                 let (want, mag) = reference(m, n, k, &lhs, ls, &rhs, rs);
                 // Row-major with two spare columns, and column-major with two spare rows.

@@ -52,19 +52,13 @@ pub enum MatmulPrecision {
 }
 
 impl MatmulPrecision {
-    /// The names [`MatmulPrecision::parse`] takes.
+    /// Every precision.
+    pub const ALL: [MatmulPrecision; 2] = [MatmulPrecision::F32, MatmulPrecision::Bf16];
+
+    /// The names its `FromStr` takes (case-insensitive), for help texts and errors.
     pub const CHOICES: &str = "`f32` (the default) or `bf16` (Intel AMX)";
 
-    /// `f32` or `bf16` (case-insensitive).
-    pub fn parse(name: &str) -> Option<Self> {
-        match name.trim().to_ascii_lowercase().as_str() {
-            "f32" => Some(MatmulPrecision::F32),
-            "bf16" => Some(MatmulPrecision::Bf16),
-            _ => None,
-        }
-    }
-
-    /// The name [`MatmulPrecision::parse`] reads back.
+    /// Its name: what `FromStr` and the config (serde, lowercase) read.
     pub fn name(self) -> &'static str {
         match self {
             MatmulPrecision::F32 => "f32",
@@ -94,7 +88,11 @@ impl std::str::FromStr for MatmulPrecision {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, String> {
-        MatmulPrecision::parse(s).ok_or_else(|| format!("unknown precision `{s}`: use {}", MatmulPrecision::CHOICES))
+        let lower = s.trim().to_ascii_lowercase();
+        MatmulPrecision::ALL
+            .into_iter()
+            .find(|p| p.name() == lower)
+            .ok_or_else(|| format!("unknown precision `{s}`: use {}", MatmulPrecision::CHOICES))
     }
 }
 
@@ -305,5 +303,20 @@ pub fn conv2d_fused(x: Tensor<4>, weight: Tensor<4>, bias: Tensor<1>, padding: u
     } else {
         let y = conv2d(x, weight, Some(bias), ConvOptions::new([1, 1], [padding, padding], [1, 1], 1));
         if relu { burn::tensor::activation::relu(y) } else { y }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::MatmulPrecision;
+
+    #[test]
+    fn precision_names_read_back() {
+        for p in MatmulPrecision::ALL {
+            assert_eq!(p.name().parse::<MatmulPrecision>(), Ok(p));
+        }
+        assert_eq!(" BF16 ".parse::<MatmulPrecision>(), Ok(MatmulPrecision::Bf16));
+        let e = "half".parse::<MatmulPrecision>().unwrap_err();
+        assert!(e.contains("`half`") && e.contains(MatmulPrecision::CHOICES), "{e}");
     }
 }
