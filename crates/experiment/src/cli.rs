@@ -32,12 +32,20 @@ pub enum ExperimentCommand {
         /// Where the report goes (default: docs/results/NAME).
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Only the runs whose path matches this glob (`task/variant/view/corruption/sN`, e.g.
+        /// `block_picking/cnn/*/*/*` or `*/cnn/**`); repeat for several. The report still covers the
+        /// whole grid.
+        #[arg(long, value_name = "GLOB")]
+        only: Vec<String>,
     },
     /// Print each run's state: finished (with its held-out success), interrupted at N updates, or new.
     Status {
         /// The grid and its runs.
         #[command(flatten)]
         at: Where,
+        /// Only the runs whose path matches this glob (as `run --only`); repeatable.
+        #[arg(long, value_name = "GLOB")]
+        only: Vec<String>,
     },
     /// Write the report (README.md with the table, and the figures) from the run directories.
     #[command(after_help = "Example:\n  equiarm experiment report tasks   # writes docs/results/tasks/")]
@@ -120,8 +128,9 @@ fn default_out(name: &str) -> PathBuf {
 /// Runs one subcommand; `stop` turns true on Ctrl-C / SIGTERM. Returns the process's exit code.
 pub fn run(cmd: ExperimentCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
     match cmd {
-        ExperimentCommand::Run { at, parallel, threads, report, out } => {
+        ExperimentCommand::Run { at, parallel, threads, report, out, only } => {
             let grid = at.grid()?;
+            let chosen = grid.only(&only)?;
             let runs = at.runs(&grid);
             let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
             let opts = RunnerOptions {
@@ -132,7 +141,7 @@ pub fn run(cmd: ExperimentCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
                 verbose: true,
             };
             let archive = crate::report::read_archives(&at.archive)?;
-            let s = crate::runner::run(&grid, &runs, &archive, &opts, stop)?;
+            let s = crate::runner::run(&chosen, &runs, &archive, &opts, stop)?;
             println!(
                 "experiment {}: {} finished before, {} finished now, {} failed, {} left unfinished",
                 grid.name,
@@ -158,8 +167,8 @@ pub fn run(cmd: ExperimentCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
                 0
             })
         }
-        ExperimentCommand::Status { at } => {
-            let grid = at.grid()?;
+        ExperimentCommand::Status { at, only } => {
+            let grid = at.grid()?.only(&only)?;
             let runs = at.runs(&grid);
             let archive = crate::report::read_archives(&at.archive)?;
             let (mut done, mut partial, mut new) = (0, 0, 0);

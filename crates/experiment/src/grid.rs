@@ -267,6 +267,33 @@ impl Grid {
         &self.cells
     }
 
+    /// The grid narrowed to the runs whose path (`task/variant/view/corruption/sN`, as under the
+    /// runs directory) matches one of the glob `patterns` (`*` within a path part, `**` across parts),
+    /// in file order; no patterns keep every run. A pattern that does not parse, or that matches no
+    /// run of the grid, is an error naming it.
+    pub fn only(&self, patterns: &[String]) -> Result<Grid> {
+        if patterns.is_empty() {
+            return Ok(self.clone());
+        }
+        let bad = |message: String| ExperimentError::Grid { path: self.path.clone(), message };
+        let opts = glob::MatchOptions { require_literal_separator: true, ..Default::default() };
+        let mut globs = Vec::new();
+        for p in patterns {
+            let g = glob::Pattern::new(p).map_err(|e| bad(format!("--only `{p}`: {e}")))?;
+            if !self.cells.iter().any(|c| g.matches_path_with(&c.rel_dir(), opts)) {
+                let example = self.cells.first().map(|c| c.rel_dir().display().to_string()).unwrap_or_default();
+                return Err(bad(format!(
+                    "--only `{p}` matches none of its {} runs (a run's path reads like `{example}`)",
+                    self.cells.len()
+                )));
+            }
+            globs.push(g);
+        }
+        let mut g = self.clone();
+        g.cells.retain(|c| globs.iter().any(|p| p.matches_path_with(&c.rel_dir(), opts)));
+        Ok(g)
+    }
+
     /// The training config of `cell`: the preset for its task, the `[config]` overrides, then the
     /// cell's variant, view, corruption, seed and the task's `[updates]`; checked.
     pub fn config(&self, cell: &Cell) -> Result<TrainConfig> {
@@ -343,6 +370,33 @@ mod tests {
         let own = parse(&format!("{BASE}runs = \"runs/own\"\n[config]\nagent = {{ matmul = \"bf16\" }}\n")).unwrap();
         assert_eq!(own.runs, Some(PathBuf::from("runs/own")));
         assert_eq!(own.config(&own.cells()[0]).unwrap().agent.matmul.name(), "bf16");
+    }
+
+    #[test]
+    fn only_keeps_the_runs_a_glob_matches_and_refuses_one_that_matches_none() {
+        let g = parse(BASE).unwrap();
+        let names = |g: &Grid| g.cells().iter().map(|c| c.rel_dir().display().to_string()).collect::<Vec<_>>();
+        assert_eq!(names(&g.only(&[]).unwrap()), names(&g));
+        let cnn = g.only(&["*/cnn_drq/**".into()]).unwrap();
+        assert_eq!(
+            names(&cnn),
+            [
+                "block_pulling/cnn_drq/side/none/s0",
+                "block_pulling/cnn_drq/side/none/s1",
+                "block_in_bowl/cnn_drq/side/none/s0",
+                "block_in_bowl/cnn_drq/side/none/s1"
+            ]
+        );
+        // several patterns: the union, in file order; `*` stays within one part of the path
+        let two = g.only(&["block_in_bowl/equi/*/*/s1".into(), "block_pulling/*/*/*/s0".into()]).unwrap();
+        assert_eq!(
+            names(&two),
+            ["block_pulling/equi/side/none/s0", "block_pulling/cnn_drq/side/none/s0", "block_in_bowl/equi/side/none/s1"]
+        );
+        for (pattern, says) in [("*/cnn/**", "matches none of its 8 runs"), ("block_pulling/*", "matches none"), ("[", "--only `[`")] {
+            let e = g.only(&[pattern.into()]).unwrap_err().to_string();
+            assert!(e.contains("experiments/t.toml") && e.contains(says), "{pattern}: {e}");
+        }
     }
 
     #[test]
