@@ -391,9 +391,15 @@ mod tests {
         let two = g.only(&["block_in_bowl/equi/*/*/s1".into(), "block_pulling/*/*/*/s0".into()]).unwrap();
         assert_eq!(
             names(&two),
-            ["block_pulling/equi/side/none/s0", "block_pulling/cnn_drq/side/none/s0", "block_in_bowl/equi/side/none/s1"]
+            [
+                "block_pulling/equi/side/none/s0",
+                "block_pulling/cnn_drq/side/none/s0",
+                "block_in_bowl/equi/side/none/s1"
+            ]
         );
-        for (pattern, says) in [("*/cnn/**", "matches none of its 8 runs"), ("block_pulling/*", "matches none"), ("[", "--only `[`")] {
+        for (pattern, says) in
+            [("*/cnn/**", "matches none of its 8 runs"), ("block_pulling/*", "matches none"), ("[", "--only `[`")]
+        {
             let e = g.only(&[pattern.into()]).unwrap_err().to_string();
             assert!(e.contains("experiments/t.toml") && e.contains(says), "{pattern}: {e}");
         }
