@@ -18,6 +18,7 @@ use equiarm_sac::config::TrainConfig;
 use equiarm_sac::replay::Stored;
 use equiarm_train::ingest::{BadTransition, Ingest};
 use equiarm_train::policy::{Policy, PolicyMode, WeightsOutcome};
+use equiarm_train::trainer::{Trainer, TrainerOptions};
 
 /// A spawned `equiarm` process whose stderr is collected line by line; killed if a test panics.
 struct Node {
@@ -467,4 +468,74 @@ fn weights_versions_only_grow_within_a_run_and_a_stray_version_cannot_silence_th
     nan.data[start..start + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     assert!(matches!(policy.on_weights(nan), WeightsOutcome::Failed(_)));
     assert_eq!(policy.version(), 4);
+}
+
+/// Regression (CI, 2026-12-03): an expert policy that never hands over (`policy --mode expert`
+/// beside an unthrottled sim) filled the 100,000-slot replay with expert transitions, which are
+/// never overwritten, and the trainer stopped with "replay buffer is full of expert transitions"
+/// before its last updates. Now the rows it has no room for are counted and dropped, and training
+/// goes on to `total_updates`. Here with 6 slots and four successful expert episodes of 3 steps.
+#[test]
+fn a_replay_full_of_expert_transitions_drops_further_rows_and_training_goes_on() {
+    let run_dir = support::scratch("learn_dds_no_room");
+    let mut cfg = TrainConfig {
+        image_size: SIZE as usize,
+        batch_size: 4,
+        training_starts: 4,
+        total_updates: 3,
+        num_envs: 1,
+        demo_episodes: 0,
+        eval_every: 0,
+        checkpoint_every: 0,
+        ..TrainConfig::reduced("block_pulling")
+    };
+    cfg.replay.capacity = 6;
+    (cfg.agent.input_size, cfg.agent.hidden) = (16, 8);
+    let opts = TrainerOptions {
+        run_dir: run_dir.clone(),
+        resume: None,
+        force: false,
+        eval_namespace: "/eval".into(),
+        deterministic: false,
+        device: equiarm_nn::device::open("cpu").unwrap(),
+        weights_every: 0,
+        progress: false,
+    };
+    let (mut trainer, mut learner) = Trainer::open(cfg, opts).unwrap();
+    let mut seq = 0;
+    for episode in 0..4 {
+        for k in 0..3 {
+            trainer.observation(&observation("env0", episode, seq, seq as u8));
+            trainer.observation(&observation("env0", episode, seq + 1, seq as u8 + 1));
+            trainer.transition(transition("env0", episode, seq, true, k == 2));
+            seq += 1;
+        }
+        seq += 1; // the next episode starts at a new Observation
+        trainer.episode(result("env0", episode, true, true)).unwrap();
+        trainer.with_learner(&mut learner, false).unwrap_or_else(|e| panic!("episode {episode}: {e}"));
+    }
+    assert_eq!((learner.replay().len(), learner.replay().expert_len()), (6, 6));
+    assert_eq!(trainer.dropped_no_room(), 6, "the last two episodes' rows had no room");
+    // A new row (an agent's, this time) finds no room either, and nothing stops.
+    trainer.observation(&observation("env0", 4, seq, 9));
+    trainer.observation(&observation("env0", 4, seq + 1, 10));
+    trainer.transition(transition("env0", 4, seq, false, false));
+    let mut updates = 0;
+    loop {
+        let next = trainer.with_learner(&mut learner, false).unwrap();
+        if trainer.stop_reason(false, Duration::from_secs(60)).is_some() {
+            break;
+        }
+        assert!(next.update, "an update is owed after {updates} updates");
+        let m = learner.update().unwrap();
+        trainer.updated(&learner, m).unwrap();
+        updates += 1;
+        assert!(updates <= 3, "the trainer did not stop at total_updates");
+    }
+    assert_eq!(trainer.dropped_no_room(), 7);
+    assert_eq!(trainer.stop_reason(false, Duration::from_secs(60)), Some("total_updates reached"));
+    let summary = trainer.finish(&mut learner, "total_updates reached").unwrap();
+    assert_eq!(summary.updates, 3);
+    let m = equiarm_sac::learner::read_manifest(&run_dir.join("checkpoints/step_0000003")).unwrap();
+    assert_eq!((m.replay_len, m.expert_len), (6, 6));
 }

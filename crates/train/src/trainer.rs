@@ -37,8 +37,8 @@ use equiarm_msgs::std_msgs::Header;
 use equiarm_nn::burn::tensor::Device;
 use equiarm_sac::agent::Metrics;
 use equiarm_sac::config::TrainConfig;
-use equiarm_sac::learner::{Learner, read_json};
-use equiarm_sac::replay::Stored;
+use equiarm_sac::learner::{Learner, LearnerError, read_json};
+use equiarm_sac::replay::{ReplayError, Stored};
 use log::{info, warn};
 use serde::{Deserialize, Serialize};
 
@@ -114,6 +114,9 @@ pub struct Trainer {
     queue: Vec<Stored>,
     bad_logged: HashSet<(String, &'static str)>,
     refused: u64,
+    /// Rows the replay had no room for: it was full of expert transitions, which are never
+    /// overwritten (an expert policy that never hands over can fill it).
+    no_room: u64,
     run_id: String,
     global_step: u64,
     version: u64,
@@ -194,6 +197,7 @@ impl Trainer {
             queue: Vec::new(),
             bad_logged: HashSet::new(),
             refused: 0,
+            no_room: 0,
             run_id: if st.run_id.is_empty() { new_run_id(&cfg) } else { st.run_id },
             global_step: st.global_step,
             version: st.version,
@@ -363,9 +367,7 @@ impl Trainer {
             }
             None => false,
         };
-        for row in self.queue.drain(..) {
-            learner.push(row)?;
-        }
+        self.store_queue(learner)?;
         let total = self.cfg.total_updates;
         let mut next = Next::default();
         if round {
@@ -380,6 +382,32 @@ impl Trainer {
             next.update = true;
         }
         Ok(next)
+    }
+
+    /// The waiting rows into the replay. A replay full of expert transitions (never overwritten)
+    /// has no room for more: such rows are counted and dropped, once logged, and training goes on
+    /// on what it holds.
+    fn store_queue(&mut self, learner: &mut Learner) -> Result<(), TrainError> {
+        for row in self.queue.drain(..) {
+            match learner.push(row) {
+                Ok(()) => {}
+                Err(LearnerError::Replay(ReplayError::AllExpert { capacity })) => {
+                    if self.no_room == 0 {
+                        warn!(
+                            "the replay is full of expert transitions ({capacity} slots, never overwritten): further transitions are dropped and counted, training goes on (a larger replay.capacity keeps more)"
+                        );
+                    }
+                    self.no_room += 1;
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
+        Ok(())
+    }
+
+    /// Rows dropped so far because the replay was full of expert transitions.
+    pub fn dropped_no_room(&self) -> u64 {
+        self.no_room
     }
 
     /// An update finished with metrics `m`: logged, checkpointed when due; returns whether to
@@ -490,9 +518,7 @@ impl Trainer {
         }
         // Rows taken since the learner was last home (an Observation can release waiting Transitions
         // on the last turn) are stored too: the checkpoint holds everything received.
-        for row in self.queue.drain(..) {
-            learner.push(row)?;
-        }
+        self.store_queue(learner)?;
         info!("stopping ({why}) at {} updates", learner.updates());
         let st = self.state();
         self.record.finish(learner, STATE_FILE, &st)?;
@@ -510,11 +536,12 @@ impl Trainer {
             c.transitions, c.stored, c.expert_held, c.eval
         );
         info!(
-            "expert transitions dropped (failed episodes) {}, malformed {} (observations {}), without their observations {}; replay {}",
+            "expert transitions dropped (failed episodes) {}, malformed {} (observations {}), without their observations {}, no room (replay full of expert transitions) {}; replay {}",
             c.expert_dropped,
             c.bad,
             c.bad_frames,
             c.unmatched,
+            self.no_room,
             learner.replay().len()
         );
         Ok(RunSummary {
