@@ -392,6 +392,39 @@ fn the_trainer_stores_each_frame_once_keeps_only_successful_demos_and_never_the_
     assert_eq!((n.bad_frames, n.unmatched), (1, 0));
 }
 
+/// Regression: a reliable RustDDS reader hands a repaired sample over after the ones that followed
+/// it. The trainer let a frame go once a Transition naming it was joined, so a late Observation's
+/// Transition waited for ever (CI: received 410 transitions, stored 409, none counted as dropped).
+#[test]
+fn observations_and_transitions_that_dds_delivers_out_of_order_are_all_joined() {
+    let cfg = TrainConfig { image_size: SIZE as usize, ..TrainConfig::reduced("block_pulling") };
+    let mut ing = Ingest::new(&cfg, "/eval");
+    let obs = |seq: u64| observation("env0", 0, seq, seq as u8);
+    // Observation 0 is lost and repaired after 1 and 2 and both Transitions.
+    for s in [1, 2] {
+        assert!(ing.observation(&obs(s)).unwrap().is_empty());
+    }
+    assert!(ing.transition(transition("env0", 0, 0, false, false)).unwrap().is_none());
+    let t1 = ing.transition(transition("env0", 0, 1, false, false)).unwrap().expect("frames 1 and 2 are here");
+    let late = ing.observation(&obs(0)).unwrap();
+    assert_eq!(late.iter().map(|j| j.t.obs_seq).collect::<Vec<_>>(), [0], "the late frame joins Transition 0");
+    assert!(std::sync::Arc::ptr_eq(&late[0].next_obs, &t1.obs), "frame 1 is shared by rows 0 and 1");
+    // Transition 2 is lost and repaired after Transition 3.
+    for s in [3, 4] {
+        assert!(ing.observation(&obs(s)).unwrap().is_empty());
+    }
+    let t3 = ing.transition(transition("env0", 0, 3, false, false)).unwrap().expect("frames 3 and 4 are here");
+    let t2 = ing.transition(transition("env0", 0, 2, false, false)).unwrap().expect("frames 2 and 3 are kept");
+    assert!(std::sync::Arc::ptr_eq(&t2.next_obs, &t3.obs));
+    let rows: usize = [t1, t2, t3].into_iter().chain(late).map(|j| ing.rows(j).len()).sum();
+    assert_eq!(rows, 4);
+    let n = &ing.counts;
+    assert_eq!((n.transitions, n.stored, n.unmatched, ing.waiting()), (4, 4, 0, 0));
+    // A Transition whose frame never comes is counted as waiting, not lost silently.
+    assert!(ing.transition(transition("env0", 0, 9, false, false)).unwrap().is_none());
+    assert_eq!(ing.waiting(), 1);
+}
+
 #[test]
 fn the_policy_refuses_foreign_weights_and_answers_a_repeated_seq_identically() {
     let arch = AgentConfig { model: ModelKind::Equi, hidden: 8, input_size: 16, ..AgentConfig::default() };

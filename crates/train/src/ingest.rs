@@ -7,8 +7,12 @@
 //!
 //! Topics are not ordered with respect to each other: a Transition may arrive before the
 //! Observations it names (it waits for them, up to [`MAX_WAITING`] per env), and a result may
-//! overtake its episode's last transitions, and then decides them on arrival. Frames are kept up to
-//! [`MAX_FRAMES`] per env; older ones, and frames below the last joined step, are dropped.
+//! overtake its episode's last transitions, and then decides them on arrival. Nor is one topic
+//! ordered: a reliable RustDDS reader hands a sample over as soon as it arrives, so one lost on the
+//! wire and sent again comes after the samples that followed it. A frame is therefore not let go
+//! when a Transition that names it is joined (an earlier Transition may still want it); frames are
+//! kept up to [`MAX_FRAMES`] per env, the oldest (lowest seq) dropped first. They cost little: the
+//! replay holds the same frames.
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::sync::Arc;
@@ -20,7 +24,8 @@ use equiarm_sac::replay::Stored;
 
 use crate::policy::{BadFrame, action_of, frame_of};
 
-/// What the trainer did with the transitions it received (N = stored + held + dropped + eval + bad).
+/// What the trainer did with the transitions it received (N = stored + held + dropped + eval + bad +
+/// unmatched + [`Ingest::waiting`]).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Received {
     /// Transitions received (all envs).
@@ -45,10 +50,12 @@ pub struct Received {
 
 type Key = (String, u32);
 
-/// Frames kept per env for Transitions still to come.
-pub const MAX_FRAMES: usize = 64;
+/// Frames kept per env for Transitions still to come (or late): a sample lost on the wire is sent
+/// again after the writer's next heartbeat (RustDDS: within about 1 s), and an env makes well under
+/// this many steps in that time.
+pub const MAX_FRAMES: usize = 256;
 /// Transitions per env that may wait for their Observations.
-pub const MAX_WAITING: usize = 64;
+pub const MAX_WAITING: usize = 256;
 
 /// A Transition with the frames of the two Observations it names.
 #[derive(Clone, Debug)]
@@ -69,14 +76,9 @@ struct EnvFrames {
 }
 
 impl EnvFrames {
-    /// The frames `t` names, if both are here (then the frames before them are let go: nothing
-    /// will name them again).
-    fn frames_of(&mut self, t: &Transition) -> Option<(Arc<StoredFrame>, Arc<StoredFrame>)> {
-        let obs = self.frames.get(&t.obs_seq)?.clone();
-        let next_obs = self.frames.get(&t.next_obs_seq)?.clone();
-        self.frames = self.frames.split_off(&t.obs_seq);
-        self.frames.remove(&t.obs_seq);
-        Some((obs, next_obs))
+    /// The frames `t` names, if both are here.
+    fn frames_of(&self, t: &Transition) -> Option<(Arc<StoredFrame>, Arc<StoredFrame>)> {
+        Some((self.frames.get(&t.obs_seq)?.clone(), self.frames.get(&t.next_obs_seq)?.clone()))
     }
 }
 
@@ -148,6 +150,12 @@ impl Ingest {
             decided: HashMap::new(),
             counts: Received::default(),
         }
+    }
+
+    /// Transitions waiting for their Observations now (all envs): at the end of a run, those whose
+    /// frames never came.
+    pub fn waiting(&self) -> u64 {
+        self.envs.values().map(|e| e.waiting.len() as u64).sum()
     }
 
     /// Whether an env name is the eval env.

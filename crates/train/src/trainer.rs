@@ -536,11 +536,12 @@ impl Trainer {
             c.transitions, c.stored, c.expert_held, c.eval
         );
         info!(
-            "expert transitions dropped (failed episodes) {}, malformed {} (observations {}), without their observations {}, no room (replay full of expert transitions) {}; replay {}",
+            "expert transitions dropped (failed episodes) {}, malformed {} (observations {}), without their observations {} (still waiting for them {}), no room (replay full of expert transitions) {}; replay {}",
             c.expert_dropped,
             c.bad,
             c.bad_frames,
             c.unmatched,
+            self.ingest.waiting(),
             self.no_room,
             learner.replay().len()
         );
