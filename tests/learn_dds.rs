@@ -336,20 +336,24 @@ fn result(env: &str, episode: u32, success: bool, expert: bool) -> EpisodeResult
     EpisodeResult { env: env.into(), episode, success, expert, ..Default::default() }
 }
 
+/// A trainer's ingest of `SIZE`-pixel frames, with `/eval` as its eval env.
+fn ingest() -> Ingest {
+    Ingest::new(&TrainConfig { image_size: SIZE as usize, ..TrainConfig::reduced("block_pulling") }, "/eval")
+}
+
 #[test]
 fn the_trainer_stores_each_frame_once_keeps_only_successful_demos_and_never_the_eval_env() {
-    let cfg = TrainConfig { image_size: SIZE as usize, ..TrainConfig::reduced("block_pulling") };
-    let mut ing = Ingest::new(&cfg, "/eval");
+    let mut ing = ingest();
     // Consecutive transitions share the frame between them.
     let a = step(&mut ing, transition("env0", 0, 0, false, false)).unwrap();
     let b = step(&mut ing, transition("env0", 0, 1, false, false)).unwrap();
     assert_eq!((a.len(), b.len()), (1, 1));
-    assert!(std::sync::Arc::ptr_eq(&a[0].next_obs, &b[0].obs), "the shared frame was stored twice");
-    assert!(!std::sync::Arc::ptr_eq(&a[0].obs, &a[0].next_obs));
+    assert!(Arc::ptr_eq(&a[0].next_obs, &b[0].obs), "the shared frame was stored twice");
+    assert!(!Arc::ptr_eq(&a[0].obs, &a[0].next_obs));
     assert_eq!(a[0].action, [1.0, 1.0, 0.0, 0.0, -1.0], "physical command → normalised action");
     // Another env's transition with the same seq does not reuse env0's frame.
     let c = step(&mut ing, transition("env1", 0, 2, false, false)).unwrap();
-    assert!(!std::sync::Arc::ptr_eq(&c[0].obs, &b[0].next_obs));
+    assert!(!Arc::ptr_eq(&c[0].obs, &b[0].next_obs));
     // The eval env is never stored.
     assert!(step(&mut ing, transition("eval", 0, 0, false, false)).unwrap().is_empty());
     // A Transition that overtakes its Observations waits for them, then is joined.
@@ -397,8 +401,7 @@ fn the_trainer_stores_each_frame_once_keeps_only_successful_demos_and_never_the_
 /// Transition waited for ever (CI: received 410 transitions, stored 409, none counted as dropped).
 #[test]
 fn observations_and_transitions_that_dds_delivers_out_of_order_are_all_joined() {
-    let cfg = TrainConfig { image_size: SIZE as usize, ..TrainConfig::reduced("block_pulling") };
-    let mut ing = Ingest::new(&cfg, "/eval");
+    let mut ing = ingest();
     let obs = |seq: u64| observation("env0", 0, seq, seq as u8);
     // Observation 0 is lost and repaired after 1 and 2 and both Transitions.
     for s in [1, 2] {
@@ -408,14 +411,14 @@ fn observations_and_transitions_that_dds_delivers_out_of_order_are_all_joined() 
     let t1 = ing.transition(transition("env0", 0, 1, false, false)).unwrap().expect("frames 1 and 2 are here");
     let late = ing.observation(&obs(0)).unwrap();
     assert_eq!(late.iter().map(|j| j.t.obs_seq).collect::<Vec<_>>(), [0], "the late frame joins Transition 0");
-    assert!(std::sync::Arc::ptr_eq(&late[0].next_obs, &t1.obs), "frame 1 is shared by rows 0 and 1");
+    assert!(Arc::ptr_eq(&late[0].next_obs, &t1.obs), "frame 1 is shared by rows 0 and 1");
     // Transition 2 is lost and repaired after Transition 3.
     for s in [3, 4] {
         assert!(ing.observation(&obs(s)).unwrap().is_empty());
     }
     let t3 = ing.transition(transition("env0", 0, 3, false, false)).unwrap().expect("frames 3 and 4 are here");
     let t2 = ing.transition(transition("env0", 0, 2, false, false)).unwrap().expect("frames 2 and 3 are kept");
-    assert!(std::sync::Arc::ptr_eq(&t2.next_obs, &t3.obs));
+    assert!(Arc::ptr_eq(&t2.next_obs, &t3.obs));
     let rows: usize = [t1, t2, t3].into_iter().chain(late).map(|j| ing.rows(j).len()).sum();
     assert_eq!(rows, 4);
     let n = &ing.counts;
