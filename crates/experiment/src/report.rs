@@ -3,7 +3,9 @@
 //! during training and of the held-out evaluation, success rate beside discounted return, the
 //! paper's figure where the grid gives it) and, per task × view × corruption, two figures of the
 //! greedy evaluations against updates (success rate, discounted return), one curve per variant:
-//! the mean over seeds with a band of ± one standard error.
+//! the mean over seeds with a band of ± one standard error. Where a task × corruption has finished
+//! runs at two or more camera views, a table and two figures of the held-out results against the
+//! camera's elevation ([`by_view`]).
 //!
 //! The report also writes `OUT/runs.json`, the archive of its finished runs (config, evaluations,
 //! result: a few kB a run). Committed with the report, it lets a later checkout, on a machine without
@@ -269,11 +271,132 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
             "![{task}, {view}, {corruption}]({stem}-success.png)\n![{task}, {view}, {corruption}: discounted return]({stem}-return.png)\n\n"
         );
     }
+    let swept = by_view(&views);
+    if !swept.is_empty() {
+        md += "\n## By camera view\n\nHeld-out evaluation of the final weights at each camera elevation, for each task and \
+               corruption with finished runs at two or more views: success rate (discounted return), mean ± standard \
+               error over the finished seeds (n).\n\n";
+    }
+    for ((task, corruption), by_variant) in &swept {
+        let mut cols: Vec<(String, f64)> =
+            by_variant.values().flatten().map(|p| (p.view.clone(), p.elevation_deg)).collect();
+        cols.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+        cols.dedup();
+        md += &format!("{task}, corruption {corruption}:\n\n| variant |");
+        for (view, deg) in &cols {
+            md += &format!(" {view} ({deg:.1}°) |");
+        }
+        md += &format!("\n|---|{}\n", "---|".repeat(cols.len()));
+        for (vi, points) in by_variant {
+            md += &format!("| {} |", VARIANTS.get(*vi).map_or("?", |v| v.label));
+            for (view, _) in &cols {
+                match points.iter().find(|p| &p.view == view) {
+                    Some(p) => {
+                        let (s, s_se) = mean_se(&p.success);
+                        let (r, r_se) = mean_se(&p.discounted_return);
+                        md += &format!(" {s:.2} ± {s_se:.2} ({r:.2} ± {r_se:.2}; n={}) |", p.success.len());
+                    }
+                    None => md += " – |",
+                }
+            }
+            md += "\n";
+        }
+        let stem = format!("{task}-{}-by_view", corruption.replace(',', "+"));
+        for (metric, label) in [("success", "success rate"), ("return", "discounted return")] {
+            let series: Vec<Series> = by_variant
+                .iter()
+                .map(|(vi, points)| {
+                    let mut stats: Vec<(f64, (f64, f64))> = points
+                        .iter()
+                        .map(|p| {
+                            let v = if metric == "success" { &p.success } else { &p.discounted_return };
+                            (p.elevation_deg, mean_se(v))
+                        })
+                        .collect();
+                    stats.sort_by(|a, b| a.0.total_cmp(&b.0));
+                    Series {
+                        label: VARIANTS.get(*vi).map_or("?".to_string(), |v| v.label.to_string()),
+                        color: palette(*vi),
+                        points: stats.iter().map(|(x, (m, _))| (*x, *m)).collect(),
+                        band: Some(stats.iter().map(|(_, (_, se))| *se).collect()),
+                    }
+                })
+                .collect();
+            let mut chart = Chart::new(
+                format!("{task}, corruption {corruption}: held-out {label} by camera elevation"),
+                "camera elevation (degrees; 90 = top-down)",
+                format!("held-out {label}"),
+            );
+            if metric == "success" {
+                chart.y_range = Some((0.0, 1.0));
+            }
+            let file = out.join(format!("{stem}-{metric}.png"));
+            write_png(&file, &chart, &series)
+                .map_err(|e| ExperimentError::Io { path: file.clone(), message: e.to_string() })?;
+            files.push(file);
+        }
+        md += &format!(
+            "\n![{task}, {corruption}, by view]({stem}-success.png)\n![{task}, {corruption}, by view: discounted return]({stem}-return.png)\n\n"
+        );
+    }
     let readme = out.join("README.md");
     std::fs::write(&readme, md).map_err(io(&readme))?;
     files.insert(0, readme);
     files.push(archive_file);
     Ok(files)
+}
+
+/// One variant's finished runs at one camera view, for the by-view summary.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ViewPoint {
+    /// The camera preset's name.
+    pub view: String,
+    /// Its camera elevation, degrees (90 = top-down).
+    pub elevation_deg: f64,
+    /// Held-out success rate of each finished seed.
+    pub success: Vec<f64>,
+    /// Held-out discounted return of each finished seed.
+    pub discounted_return: Vec<f64>,
+}
+
+/// The finished runs' held-out results by camera elevation (the paper's view-angle figure, docs/paper.md
+/// §5.1): task × corruption → variant (index into [`VARIANTS`]) → one point per view, highest elevation
+/// first. Only task × corruption pairs with finished runs at two or more views are kept.
+pub fn by_view(views: &[RunView]) -> BTreeMap<(String, String), BTreeMap<usize, Vec<ViewPoint>>> {
+    let mut out: BTreeMap<(String, String), BTreeMap<usize, Vec<ViewPoint>>> = BTreeMap::new();
+    for v in views {
+        let (Some(r), Some(preset)) = (&v.result, equiarm_sim::camera::ViewPreset::from_name(&v.cell.view)) else {
+            continue;
+        };
+        let vi = VARIANTS.iter().position(|x| x.name == v.cell.variant).unwrap_or(usize::MAX);
+        let points = out.entry((v.cell.task.clone(), v.cell.corruption.clone())).or_default().entry(vi).or_default();
+        let i = match points.iter().position(|p| p.view == v.cell.view) {
+            Some(i) => i,
+            None => {
+                points.push(ViewPoint {
+                    view: v.cell.view.clone(),
+                    elevation_deg: preset.config().elevation_deg,
+                    success: Vec::new(),
+                    discounted_return: Vec::new(),
+                });
+                points.len() - 1
+            }
+        };
+        points[i].success.push(r.heldout.success_rate);
+        points[i].discounted_return.push(r.heldout.discounted_return);
+    }
+    out.retain(|_, by_variant| {
+        let mut seen: Vec<&str> = by_variant.values().flatten().map(|p| p.view.as_str()).collect();
+        seen.sort_unstable();
+        seen.dedup();
+        seen.len() >= 2
+    });
+    for by_variant in out.values_mut() {
+        for points in by_variant.values_mut() {
+            points.sort_by(|a, b| b.elevation_deg.total_cmp(&a.elevation_deg));
+        }
+    }
+    out
 }
 
 /// A relative link from a file in `from_dir` to `to` (both relative to the working directory), or
@@ -348,6 +471,56 @@ mod tests {
         other.seed = 9;
         assert!(archived(&archive, &cell, &other).is_none());
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn by_view_groups_finished_runs_by_elevation_and_drops_single_view_groups() {
+        let run = |task: &str, variant: &str, view: &str, seed: u64, success: Option<f64>| RunView {
+            cell: Cell {
+                task: task.into(),
+                variant: variant.into(),
+                view: view.into(),
+                corruption: "gripper_only".into(),
+                seed,
+            },
+            evals: Vec::new(),
+            result: success.map(|s| RunResult {
+                updates: 10,
+                env_steps: 50,
+                train_seconds: 1.0,
+                last_eval: None,
+                heldout: EvalResult {
+                    episodes: 100,
+                    success_rate: s,
+                    discounted_return: s / 2.0,
+                    ..EvalResult::default()
+                },
+                heldout_seconds: 1.0,
+            }),
+            total_updates: 10,
+        };
+        let views = [
+            run("block_pulling", "equi", "angle15", 0, Some(0.2)),
+            run("block_pulling", "equi", "angle90", 0, Some(0.9)),
+            run("block_pulling", "equi", "angle90", 1, Some(0.7)),
+            run("block_pulling", "equi", "angle30", 0, None),
+            run("block_pulling", "cnn", "side", 0, Some(0.5)),
+            // one view only: no sweep to draw
+            run("block_pushing", "equi", "angle90", 0, Some(0.4)),
+            run("block_pushing", "cnn", "angle90", 0, Some(0.3)),
+        ];
+        let swept = by_view(&views);
+        assert_eq!(swept.len(), 1);
+        let pulling = &swept[&("block_pulling".to_string(), "gripper_only".to_string())];
+        let equi = &pulling[&0];
+        assert_eq!(equi.iter().map(|p| p.view.as_str()).collect::<Vec<_>>(), ["angle90", "angle15"]);
+        assert_eq!(equi[0].elevation_deg, 90.0);
+        assert_eq!(equi[0].success, [0.9, 0.7]);
+        assert_eq!(equi[0].discounted_return, [0.45, 0.35]);
+        assert_eq!(equi[1].success, [0.2]);
+        let cnn = &pulling[&VARIANTS.iter().position(|v| v.name == "cnn").unwrap()];
+        assert_eq!(cnn.len(), 1);
+        assert!((cnn[0].elevation_deg - 47.49).abs() < 0.01, "side is BulletArm's 47.5° view");
     }
 
     #[test]
