@@ -229,48 +229,6 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
         }
         md += "\n";
     }
-    md += "\n## Learning curves\n\nGreedy evaluations during training, mean ± one standard error over seeds (a seed counts at an update count once it has evaluated there).\n\n";
-    for ((task, view, corruption), by_variant) in &groups {
-        let stem = format!("{task}-{view}-{}", corruption.replace(',', "+"));
-        for (metric, label) in [("success", "success rate"), ("return", "discounted return")] {
-            let series: Vec<Series> = by_variant
-                .iter()
-                .map(|(vi, runs_of)| {
-                    let seeds = runs_of.iter().filter(|r| !r.evals.is_empty()).count();
-                    let label = VARIANTS.get(*vi).map_or("?".to_string(), |v| format!("{} ({seeds} seeds)", v.label));
-                    let mut at: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
-                    for r in runs_of {
-                        for e in &r.evals {
-                            let y = if metric == "success" { e.success_rate } else { e.discounted_return };
-                            at.entry(e.updates).or_default().push(y);
-                        }
-                    }
-                    let stats: Vec<(f64, (f64, f64))> = at.iter().map(|(u, v)| (*u as f64, mean_se(v))).collect();
-                    Series {
-                        label,
-                        color: palette(*vi),
-                        points: stats.iter().map(|(x, (m, _))| (*x, *m)).collect(),
-                        band: Some(stats.iter().map(|(_, (_, se))| *se).collect()),
-                    }
-                })
-                .collect();
-            let mut chart = Chart::new(
-                format!("{task}, view {view}, corruption {corruption}"),
-                "updates",
-                format!("evaluation {label}"),
-            );
-            if metric == "success" {
-                chart.y_range = Some((0.0, 1.0));
-            }
-            let file = out.join(format!("{stem}-{metric}.png"));
-            write_png(&file, &chart, &series)
-                .map_err(|e| ExperimentError::Io { path: file.clone(), message: e.to_string() })?;
-            files.push(file);
-        }
-        md += &format!(
-            "![{task}, {view}, {corruption}]({stem}-success.png)\n![{task}, {view}, {corruption}: discounted return]({stem}-return.png)\n\n"
-        );
-    }
     let swept = by_view(&views);
     if !swept.is_empty() {
         md += "\n## By camera view\n\nHeld-out evaluation of the final weights at each camera elevation, for each task and \
@@ -337,6 +295,48 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
         }
         md += &format!(
             "\n![{task}, {corruption}, by view]({stem}-success.png)\n![{task}, {corruption}, by view: discounted return]({stem}-return.png)\n\n"
+        );
+    }
+    md += "\n## Learning curves\n\nGreedy evaluations during training, mean ± one standard error over seeds (a seed counts at an update count once it has evaluated there).\n\n";
+    for ((task, view, corruption), by_variant) in &groups {
+        let stem = format!("{task}-{view}-{}", corruption.replace(',', "+"));
+        for (metric, label) in [("success", "success rate"), ("return", "discounted return")] {
+            let series: Vec<Series> = by_variant
+                .iter()
+                .map(|(vi, runs_of)| {
+                    let seeds = runs_of.iter().filter(|r| !r.evals.is_empty()).count();
+                    let label = VARIANTS.get(*vi).map_or("?".to_string(), |v| format!("{} ({seeds} seeds)", v.label));
+                    let mut at: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
+                    for r in runs_of {
+                        for e in &r.evals {
+                            let y = if metric == "success" { e.success_rate } else { e.discounted_return };
+                            at.entry(e.updates).or_default().push(y);
+                        }
+                    }
+                    let stats: Vec<(f64, (f64, f64))> = at.iter().map(|(u, v)| (*u as f64, mean_se(v))).collect();
+                    Series {
+                        label,
+                        color: palette(*vi),
+                        points: stats.iter().map(|(x, (m, _))| (*x, *m)).collect(),
+                        band: Some(stats.iter().map(|(_, (_, se))| *se).collect()),
+                    }
+                })
+                .collect();
+            let mut chart = Chart::new(
+                format!("{task}, view {view}, corruption {corruption}"),
+                "updates",
+                format!("evaluation {label}"),
+            );
+            if metric == "success" {
+                chart.y_range = Some((0.0, 1.0));
+            }
+            let file = out.join(format!("{stem}-{metric}.png"));
+            write_png(&file, &chart, &series)
+                .map_err(|e| ExperimentError::Io { path: file.clone(), message: e.to_string() })?;
+            files.push(file);
+        }
+        md += &format!(
+            "![{task}, {view}, {corruption}]({stem}-success.png)\n![{task}, {view}, {corruption}: discounted return]({stem}-return.png)\n\n"
         );
     }
     let readme = out.join("README.md");
