@@ -272,26 +272,15 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
                         })
                         .collect();
                     stats.sort_by(|a, b| a.0.total_cmp(&b.0));
-                    Series {
-                        label: VARIANTS.get(*vi).map_or("?".to_string(), |v| v.label.to_string()),
-                        color: palette(*vi),
-                        points: stats.iter().map(|(x, (m, _))| (*x, *m)).collect(),
-                        band: Some(stats.iter().map(|(_, (_, se))| *se).collect()),
-                    }
+                    mean_band(VARIANTS.get(*vi).map_or("?".to_string(), |v| v.label.to_string()), *vi, &stats)
                 })
                 .collect();
-            let mut chart = Chart::new(
+            let chart = Chart::new(
                 format!("{task}, corruption {corruption}: held-out {label} by camera elevation"),
                 "camera elevation (degrees; 90 = top-down)",
                 format!("held-out {label}"),
             );
-            if metric == "success" {
-                chart.y_range = Some((0.0, 1.0));
-            }
-            let file = out.join(format!("{stem}-{metric}.png"));
-            write_png(&file, &chart, &series)
-                .map_err(|e| ExperimentError::Io { path: file.clone(), message: e.to_string() })?;
-            files.push(file);
+            files.push(draw(out, &format!("{stem}-{metric}.png"), chart, metric, &series)?);
         }
         md += &format!(
             "\n![{task}, {corruption}, by view]({stem}-success.png)\n![{task}, {corruption}, by view: discounted return]({stem}-return.png)\n\n"
@@ -314,26 +303,15 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
                         }
                     }
                     let stats: Vec<(f64, (f64, f64))> = at.iter().map(|(u, v)| (*u as f64, mean_se(v))).collect();
-                    Series {
-                        label,
-                        color: palette(*vi),
-                        points: stats.iter().map(|(x, (m, _))| (*x, *m)).collect(),
-                        band: Some(stats.iter().map(|(_, (_, se))| *se).collect()),
-                    }
+                    mean_band(label, *vi, &stats)
                 })
                 .collect();
-            let mut chart = Chart::new(
+            let chart = Chart::new(
                 format!("{task}, view {view}, corruption {corruption}"),
                 "updates",
                 format!("evaluation {label}"),
             );
-            if metric == "success" {
-                chart.y_range = Some((0.0, 1.0));
-            }
-            let file = out.join(format!("{stem}-{metric}.png"));
-            write_png(&file, &chart, &series)
-                .map_err(|e| ExperimentError::Io { path: file.clone(), message: e.to_string() })?;
-            files.push(file);
+            files.push(draw(out, &format!("{stem}-{metric}.png"), chart, metric, &series)?);
         }
         md += &format!(
             "![{task}, {view}, {corruption}]({stem}-success.png)\n![{task}, {view}, {corruption}: discounted return]({stem}-return.png)\n\n"
@@ -344,6 +322,26 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
     files.insert(0, readme);
     files.push(archive_file);
     Ok(files)
+}
+
+/// Variant `vi`'s curve: the mean at each x, with a band of ± one standard error.
+fn mean_band(label: String, vi: usize, stats: &[(f64, (f64, f64))]) -> Series {
+    Series {
+        label,
+        color: palette(vi),
+        points: stats.iter().map(|(x, (m, _))| (*x, *m)).collect(),
+        band: Some(stats.iter().map(|(_, (_, se))| *se).collect()),
+    }
+}
+
+/// Draws `series` into `OUT/NAME` (a success-rate chart on a fixed 0–1 axis); returns the file.
+fn draw(out: &Path, name: &str, mut chart: Chart, metric: &str, series: &[Series]) -> Result<PathBuf> {
+    if metric == "success" {
+        chart.y_range = Some((0.0, 1.0));
+    }
+    let file = out.join(name);
+    write_png(&file, &chart, series).map_err(|e| ExperimentError::Io { path: file.clone(), message: e.to_string() })?;
+    Ok(file)
 }
 
 /// One variant's finished runs at one camera view, for the by-view summary.
