@@ -384,10 +384,7 @@ pub fn by_view(views: &[RunView]) -> BTreeMap<(String, String), BTreeMap<usize, 
         points[i].discounted_return.push(r.heldout.discounted_return);
     }
     out.retain(|_, by_variant| {
-        let mut seen: Vec<&str> = by_variant.values().flatten().map(|p| p.view.as_str()).collect();
-        seen.sort_unstable();
-        seen.dedup();
-        seen.len() >= 2
+        by_variant.values().flatten().map(|p| p.view.as_str()).collect::<std::collections::BTreeSet<_>>().len() >= 2
     });
     for by_variant in out.values_mut() {
         for points in by_variant.values_mut() {
