@@ -157,6 +157,9 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
     );
     let mut sim = Stepper::new(cfg, &env_name, args.seed, args.eval).context("building the simulated env")?;
     let mut node = RosNode::new(&args.namespace, "sim", opts)?;
+    // the scene first, right after joining: a run stopped early still shows what this sim rendered
+    let timeout = Duration::from_millis(args.timeout_ms.max(1));
+    info!("{}: task {task}, {scene}, seed {}, env '{env_name}', re-publish after {timeout:?}", node.name(), args.seed);
     let obs_pub = node.publisher::<Observation>("observation", qos::command())?;
     let transition_pub = node.publisher::<Transition>("/transitions", qos::stream(100))?;
     let episode_pub = node.publisher::<EpisodeResult>("/episodes", qos::stream(100))?;
@@ -169,8 +172,6 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
         Ok(())
     };
     let camera = CameraPublishers::new(&mut node, sim.env())?;
-    let timeout = Duration::from_millis(args.timeout_ms.max(1));
-    info!("{}: task {task}, {scene}, seed {}, env '{env_name}', re-publish after {timeout:?}", node.name(), args.seed);
     let signal = shutdown_signal();
     tokio::pin!(signal);
     'episodes: while sim.episodes_started() < args.episodes.unwrap_or(u32::MAX) {
