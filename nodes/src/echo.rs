@@ -60,6 +60,7 @@ pub async fn echo<M: RosMessage>(
     count: Option<u64>,
     mut out: impl Write,
 ) -> anyhow::Result<u64> {
+    crate::signals::install()?; // first: a signal during start-up is then not lost
     let mut node = RosNode::new("/", "equiarm_echo", opts)?;
     let sub = node.subscription::<M>(topic, qos.profile())?;
     let mut printed = 0;

@@ -107,6 +107,7 @@ fn played_qos(offered_qos: &str) -> ros2_client::qos::QosProfile {
 
 /// Plays the bag once; returns (published, skipped) counts.
 pub async fn run(opts: &RosOptions, cfg: PlayConfig) -> anyhow::Result<(u64, u64)> {
+    crate::signals::install()?; // first: a signal during start-up is then not lost
     let reader = Reader::open(&cfg.bag)?;
     let info = reader.info()?;
     if info.messages == 0 {

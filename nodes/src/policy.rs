@@ -19,6 +19,7 @@ use crate::ros::{Publisher, RosNode, RosOptions, Subscriber, qos, shutdown_signa
 
 /// Runs the node until SIGINT/SIGTERM; returns the commands sent.
 pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
+    crate::signals::install()?; // first: a signal during start-up is then not lost
     let (agent, frame, actor) = architecture(args)?;
     let mut policy = Policy::new(args.mode, agent.clone(), frame, actor.as_deref(), args.seed)?
         .with_expert_episodes(args.expert_episodes);

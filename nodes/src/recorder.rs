@@ -168,6 +168,7 @@ fn ros_topic(dds_name: &str, dds_type: &str) -> Option<(String, &'static str)> {
 
 /// Runs the recorder until SIGINT/SIGTERM (or `duration`), then finishes the bag.
 pub async fn run(opts: &RosOptions, cfg: RecordConfig) -> anyhow::Result<equiarm_bag::BagSummary> {
+    crate::signals::install()?; // first: a signal during start-up is then not lost
     if cfg.topics.is_empty() && !cfg.all {
         bail!("nothing to record: name topics as TOPIC:TYPE, or pass --all");
     }

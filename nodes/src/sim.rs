@@ -143,6 +143,7 @@ pub fn parse_view(name: &str) -> anyhow::Result<ViewPreset> {
 
 /// Runs the node until `args.episodes` episodes ended, or SIGINT/SIGTERM.
 pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> {
+    crate::signals::install()?; // first: a signal during start-up is then not lost
     let cfg = env_config(args)?;
     let env_name = args.namespace.trim_matches('/').to_string();
     if env_name.is_empty() || env_name.contains('/') {

@@ -185,6 +185,7 @@ async fn wait_for_sims(n: &mut Node, envs: &[String], stop: &AtomicBool) -> anyh
 
 /// Runs the trainer node until `total_updates`, a signal or the idle timeout.
 pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyhow::Result<RunSummary> {
+    let stop = stop_flag(); // first: a signal while the run opens is then not lost
     let options = TrainerOptions {
         run_dir: args.run_dir(),
         resume: args.resume.clone(),
@@ -197,7 +198,6 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     };
     let (num_envs, deterministic) = (cfg.num_envs, args.deterministic);
     let (trainer, learner) = Trainer::open(cfg, options)?;
-    let stop = stop_flag();
     let mut node = RosNode::new("/", "trainer", opts)?;
     let envs = args.env_namespaces(num_envs);
     // (the transition and episode readers first: see wait_for_sims)
