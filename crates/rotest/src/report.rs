@@ -111,8 +111,15 @@ pub fn figure(
     let mut buf = vec![255u8; (w * h * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        let ns: Vec<usize> = by_var.values().flat_map(|m| m.keys().copied()).collect();
-        let (lo, hi) = (ns.iter().copied().min().unwrap_or(1) as f64, ns.iter().copied().max().unwrap_or(1) as f64);
+        // The sizes that were run, sorted and once each: the axis's ticks (the log scale's own ticks
+        // crowd into each other once N spans more than a decade).
+        let ns: Vec<usize> = by_var
+            .values()
+            .flat_map(|m| m.keys().copied())
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
+            .collect();
+        let (lo, hi) = (ns.first().copied().unwrap_or(1) as f64, ns.last().copied().unwrap_or(1) as f64);
         // Logarithmic N axis with a margin of 20 % on both sides (N = 100, 400, 1600 evenly spaced).
         let (x0, x1) = (lo.max(1.0) / 1.25, hi.max(1.0) * 1.25);
         let mut chart = ChartBuilder::on(&root)
@@ -120,7 +127,10 @@ pub fn figure(
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(50)
-            .build_cartesian_2d((x0..x1).log_scale(), 0f64..100f64)
+            .build_cartesian_2d(
+                (x0..x1).log_scale().with_key_points(ns.iter().map(|&n| n as f64).collect()),
+                0f64..100f64,
+            )
             .map_err(|e| err(e.to_string()))?;
         chart
             .configure_mesh()
