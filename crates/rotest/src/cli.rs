@@ -90,7 +90,8 @@ pub enum RotestCommand {
         out: PathBuf,
     },
     /// Run the experiment: for each setting, generate its dataset if `DATA/<setting>` has none, then
-    /// train Equi, CNN and CNN + image transformations (img-trans = N) for each N and seed whose
+    /// train Equi, CNN and CNN + image transformations (img-trans = N), or the `--variants` named,
+    /// for each N and seed whose
     /// `RUNS/<setting>/<variant>/<N>/s<seed>/run.json` does not exist yet and that the report's
     /// archive (`REPORT/rotest_runs.json`) does not hold (so an interrupted grid continues where it
     /// stopped, on this machine or from a committed report), then write the report.
@@ -113,6 +114,9 @@ pub enum RotestCommand {
         /// Seeds.
         #[arg(long, value_delimiter = ',', default_value = "0,1,2,3")]
         seeds: Vec<u64>,
+        /// The networks to train (e.g. `cnn` alone for a size only the CNN is run at).
+        #[arg(long, value_delimiter = ',', default_value = "equi,cnn,cnn+trans")]
+        variants: Vec<Variant>,
         /// Pairs per generated dataset.
         #[arg(long, default_value_t = 2000)]
         pairs: usize,
@@ -149,6 +153,38 @@ pub enum RotestCommand {
         #[arg(short, long, default_value = "docs/results")]
         out: PathBuf,
     },
+}
+
+/// One of the experiment's three networks, as `grid --variants` and the run directories name it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Variant {
+    /// The C8-equivariant classifier.
+    Equi,
+    /// The plain CNN.
+    Cnn,
+    /// The plain CNN with all eight C8 rotations of its N training pairs ("+ image transformations").
+    #[value(name = "cnn+trans")]
+    CnnTrans,
+}
+
+impl Variant {
+    /// The directory name below `RUNS/<setting>/`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Variant::Equi => "equi",
+            Variant::Cnn => "cnn",
+            Variant::CnnTrans => "cnn+trans",
+        }
+    }
+
+    /// The network and the number of pairs rotated by the augmentation, at training-set size `n`.
+    pub fn model(self, n: usize) -> (ModelKind, usize) {
+        match self {
+            Variant::Equi => (ModelKind::Equi, 0),
+            Variant::Cnn => (ModelKind::Cnn, 0),
+            Variant::CnnTrans => (ModelKind::Cnn, n),
+        }
+    }
 }
 
 /// Training options shared by `train` and `grid`.
@@ -305,15 +341,15 @@ pub fn run(cmd: RotestCommand) -> Result<()> {
             let r = crate::train::run(&ds, &cfg, &device, &out, &mut print_epoch)?;
             println!("{}", summary(&r));
         }
-        RotestCommand::Grid { data, runs, settings, sizes, seeds, pairs, opts, report } => {
+        RotestCommand::Grid { data, runs, settings, sizes, seeds, variants, pairs, opts, report } => {
             let list: Vec<Corruptions> = if settings.trim() == "all" {
                 PAPER_SETTINGS.iter().map(|s| Corruptions::parse(s)).collect::<Result<_, _>>()?
             } else {
                 settings.split(';').map(Corruptions::parse).collect::<Result<_, _>>()?
             };
-            if sizes.is_empty() || seeds.is_empty() {
+            if sizes.is_empty() || seeds.is_empty() || variants.is_empty() {
                 return Err(crate::RotestError::Config {
-                    field: "--sizes/--seeds",
+                    field: "--sizes/--seeds/--variants",
                     message: "need at least one of each".into(),
                 });
             }
@@ -337,10 +373,10 @@ pub fn run(cmd: RotestCommand) -> Result<()> {
                     .collect();
                 for &n in &sizes {
                     for &seed in &seeds {
-                        for (model, img_trans, name) in
-                            [(ModelKind::Equi, 0, "equi"), (ModelKind::Cnn, 0, "cnn"), (ModelKind::Cnn, n, "cnn+trans")]
-                        {
-                            let out = runs.join(&stem).join(name).join(n.to_string()).join(format!("s{seed}"));
+                        for &variant in &variants {
+                            let (model, img_trans) = variant.model(n);
+                            let out =
+                                runs.join(&stem).join(variant.name()).join(n.to_string()).join(format!("s{seed}"));
                             if out.join("run.json").is_file() {
                                 continue;
                             }

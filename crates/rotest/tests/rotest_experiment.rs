@@ -216,3 +216,50 @@ fn early_stopping_waits_for_patience_after_min_epochs_and_reports_the_best_epoch
         assert!(rec.history[1..].iter().all(|e| e.test_acc.is_none()));
     }
 }
+
+/// `rotest grid --variants cnn` trains the CNN alone, writes the report, and skips the run the
+/// second time; an empty list of variants is refused naming the flag.
+#[test]
+fn the_grid_trains_only_the_variants_named_and_skips_finished_runs() {
+    use equiarm_rotest::cli::{RotestCommand, TrainOpts, Variant, run};
+    let root = scratch("grid_variants");
+    data("none", 19, 12, 7).write(&root.join("data").join("none")).unwrap();
+    let opts = TrainOpts {
+        no_crop: false,
+        paper: false,
+        hidden: Some(8),
+        input: Some(16),
+        val_pairs: 4,
+        test_pairs: 4,
+        lr: 1e-3,
+        batch: 8,
+        min_epochs: 1,
+        patience: 1,
+        max_epochs: 1,
+        device: "cpu".into(),
+        matmul: Default::default(),
+    };
+    let grid = |variants: Vec<Variant>| RotestCommand::Grid {
+        data: root.join("data"),
+        runs: root.join("runs"),
+        settings: "none".into(),
+        sizes: vec![4],
+        seeds: vec![0],
+        variants,
+        pairs: 12,
+        opts: opts.clone(),
+        report: root.join("report"),
+    };
+    run(grid(vec![Variant::Cnn])).unwrap();
+    let runs = root.join("runs").join("none");
+    let cnn = runs.join("cnn").join("4").join("s0").join("run.json");
+    assert!(cnn.is_file());
+    assert!(!runs.join("equi").exists() && !runs.join("cnn+trans").exists());
+    let table = std::fs::read_to_string(root.join("report").join("rotest.md")).unwrap();
+    assert!(table.contains("| none | 4 |"), "{table}");
+    let written = std::fs::metadata(&cnn).unwrap().modified().unwrap();
+    run(grid(vec![Variant::Cnn])).unwrap();
+    assert_eq!(std::fs::metadata(&cnn).unwrap().modified().unwrap(), written, "a finished run was trained again");
+    let err = run(grid(vec![])).unwrap_err().to_string();
+    assert!(err.contains("--variants"), "{err}");
+}
