@@ -359,6 +359,11 @@ pub fn run(cmd: RotestCommand) -> Result<()> {
                 crate::train::split(pairs, &cfg)?;
             }
             let device = equiarm_nn::device::open(&opts.device)?;
+            // The runs a committed report holds (read once: the grid writes the report only at the end).
+            let archived: BTreeMap<_, _> = crate::report::read_archive(&report.join(crate::report::ARCHIVE_FILE))?
+                .into_iter()
+                .map(|r| (crate::report::run_key(&r), r.config))
+                .collect();
             for c in &list {
                 let stem = setting_file_stem(c);
                 let dir = data.join(&stem);
@@ -367,10 +372,6 @@ pub fn run(cmd: RotestCommand) -> Result<()> {
                     println!("{}", ds.write(&dir)?.display());
                 }
                 let ds = Dataset::read(&dir, None)?;
-                let archived: BTreeMap<_, _> = crate::report::read_archive(&report.join(crate::report::ARCHIVE_FILE))?
-                    .into_iter()
-                    .map(|r| (crate::report::run_key(&r), r.config))
-                    .collect();
                 for &n in &sizes {
                     for &seed in &seeds {
                         for &variant in &variants {
