@@ -10,16 +10,26 @@ use std::path::{Path, PathBuf};
 use equiarm_train::plot::{ensure_font, mean_se};
 use plotters::prelude::*;
 
+use equiarm_sim::rotest::Corruption;
+
 use crate::error::{Result, RotestError, io};
 use crate::train::{ModelKind, RunRecord};
 
-/// Name of a run's variant: `Equi`, `CNN` or `CNN + trans`, with ` (no crop)` when crops were off.
+/// The variant name of the C8 network.
+pub const EQUI: &str = "Equi";
+/// The variant name of the CNN.
+pub const CNN: &str = "CNN";
+/// The variant name of the CNN trained on the eight rotations of its pairs (`--img-trans`).
+pub const CNN_TRANS: &str = "CNN + trans";
+
+/// Name of a run's variant: [`EQUI`], [`CNN`] or [`CNN_TRANS`] (or `Equi + trans`), with
+/// ` (no crop)` when crops were off.
 pub fn variant(r: &RunRecord) -> String {
     let base = match (r.config.model, r.config.img_trans > 0) {
-        (ModelKind::Equi, false) => "Equi",
+        (ModelKind::Equi, false) => EQUI,
         (ModelKind::Equi, true) => "Equi + trans",
-        (ModelKind::Cnn, false) => "CNN",
-        (ModelKind::Cnn, true) => "CNN + trans",
+        (ModelKind::Cnn, false) => CNN,
+        (ModelKind::Cnn, true) => CNN_TRANS,
     };
     if r.config.crop { base.to_string() } else { format!("{base} (no crop)") }
 }
@@ -69,8 +79,19 @@ pub fn table(runs: &[(PathBuf, RunRecord)]) -> Table {
     t
 }
 
+/// A cell of accuracies in percent: `mean ± s.e. (seeds)`, or `mean (1)` for a single seed (whose
+/// standard error is unknown, not zero).
+fn cell(acc: &[f64]) -> String {
+    let (m, se) = mean_se(acc);
+    if acc.len() < 2 {
+        format!("{:.1} (1)", 100.0 * m)
+    } else {
+        format!("{:.1} ± {:.1} ({})", 100.0 * m, 100.0 * se, acc.len())
+    }
+}
+
 /// The Markdown table: one row per setting and training size, one column per variant, cells
-/// `mean ± s.e. (seeds)` in percent.
+/// [`cell`]s in percent.
 pub fn markdown(t: &Table) -> String {
     let mut variants: Vec<String> = t.values().flat_map(|v| v.keys().cloned()).collect();
     variants.sort();
@@ -84,16 +105,179 @@ pub fn markdown(t: &Table) -> String {
             let cells: Vec<String> = variants
                 .iter()
                 .map(|v| match by_var.get(v).and_then(|m| m.get(&n)) {
-                    Some(acc) => {
-                        let (m, se) = mean_se(acc);
-                        format!("{:.1} ± {:.1} ({})", 100.0 * m, 100.0 * se, acc.len())
-                    }
+                    Some(acc) => cell(acc),
                     None => "–".into(),
                 })
                 .collect();
             s += &format!("| {setting} | {n} | {} |\n", cells.join(" | "));
         }
     }
+    s
+}
+
+/// The difference of two cells' mean accuracies in points, with the standard error of the
+/// difference (`√(se_a² + se_b²)`) when both cells have two seeds or more.
+#[derive(Clone, Copy, Debug)]
+struct Diff {
+    points: f64,
+    se: Option<f64>,
+}
+
+/// A difference of accuracies (fractions) in points, with rounding noise of the means (below
+/// 1e-6 points) set to zero: accuracies are counts over the same test set, so equal means tie.
+fn points(fraction: f64) -> f64 {
+    let p = 100.0 * fraction;
+    if p.abs() < 1e-6 { 0.0 } else { p }
+}
+
+impl Diff {
+    fn of(a: &[f64], b: &[f64]) -> Self {
+        let ((ma, sa), (mb, sb)) = (mean_se(a), mean_se(b));
+        let se = (a.len() >= 2 && b.len() >= 2).then(|| 100.0 * sa.hypot(sb));
+        Diff { points: points(ma - mb), se }
+    }
+
+    /// Whether the difference is within two of its standard errors of zero (`None` without one).
+    fn within_two_se(self) -> Option<bool> {
+        self.se.map(|se| self.points.abs() <= 2.0 * se)
+    }
+}
+
+impl std::fmt::Display for Diff {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{:+.1}", self.points)?;
+        if let Some(se) = self.se { write!(f, " ± {se:.1}") } else { Ok(()) }
+    }
+}
+
+/// Whether a setting's labels are inverted by the objects' arrangement (invert-label), the one
+/// setting where the paper expects the CNN ahead.
+fn inverts_labels(setting: &str) -> bool {
+    setting.split(',').any(|w| Corruption::from_name(w.trim()) == Some(Corruption::InvertLabel))
+}
+
+/// `a − b` for every setting of `settings` and training size both variants have: a Markdown table
+/// (one row per setting, one column per size) and the differences themselves.
+fn diff_table(t: &Table, settings: &[&String], a: &str, b: &str) -> (String, Vec<(String, usize, Diff)>) {
+    let mut cells = Vec::new();
+    for &setting in settings {
+        let (Some(ra), Some(rb)) = (t[setting].get(a), t[setting].get(b)) else { continue };
+        for (n, acc_a) in ra {
+            if let Some(acc_b) = rb.get(n) {
+                cells.push((setting.clone(), *n, Diff::of(acc_a, acc_b)));
+            }
+        }
+    }
+    let ns: std::collections::BTreeSet<usize> = cells.iter().map(|c| c.1).collect();
+    let mut s = format!(
+        "| setting | {} |\n|---|{}\n",
+        ns.iter().map(|n| format!("N = {n}")).collect::<Vec<_>>().join(" | "),
+        "---|".repeat(ns.len())
+    );
+    for &setting in settings {
+        if !cells.iter().any(|c| &c.0 == setting) {
+            continue;
+        }
+        let row: Vec<String> = ns
+            .iter()
+            .map(|n| cells.iter().find(|c| &c.0 == setting && c.1 == *n).map_or("–".to_string(), |c| c.2.to_string()))
+            .collect();
+        s += &format!("| {setting} | {} |\n", row.join(" | "));
+    }
+    (s, cells)
+}
+
+/// A list of cells for a sentence: `` `setting` N = n (diff)``, comma-separated, or "none".
+fn cell_list<'a>(cells: impl Iterator<Item = &'a (String, usize, Diff)>) -> String {
+    let v: Vec<String> = cells.map(|(s, n, d)| format!("`{s}` N = {n} ({d})")).collect();
+    if v.is_empty() { "none".into() } else { v.join(", ") }
+}
+
+/// The paper's three claims about this experiment (docs/paper.md §4), each checked on `t` in
+/// Markdown: Equi ahead of the CNN on every setting but invert-label; on invert-label Equi at most
+/// the invariant bound (from `bounds`) while the CNN exceeds it; CNN + trans close to Equi.
+/// Differences are in points, with the standard error of the difference where both cells have two
+/// seeds or more; "clearly" means by more than two such standard errors.
+pub fn claims(t: &Table, bounds: &BTreeMap<String, f64>) -> String {
+    let settings: Vec<&String> = t.keys().filter(|s| !inverts_labels(s)).collect();
+    let mut s = String::from("## The paper's claims, checked on this table\n\n");
+
+    let (table, cells) = diff_table(t, &settings, EQUI, CNN);
+    let ahead = cells.iter().filter(|c| c.2.points > 0.0).count();
+    let with_se: Vec<_> = cells.iter().filter(|c| c.2.se.is_some()).collect();
+    let clearly = with_se.iter().filter(|c| c.2.points > 0.0 && c.2.within_two_se() == Some(false)).count();
+    s += &format!(
+        "**1. Equi ahead of the CNN on every setting but invert-label.** Equi − CNN, points:\n\n{table}\n\
+         Equi's mean is above the CNN's in {ahead} of {} cells (clearly in {clearly} of the {} with two \
+         seeds or more of both); not above: {}.\n\n",
+        cells.len(),
+        with_se.len(),
+        cell_list(cells.iter().filter(|c| c.2.points <= 0.0)),
+    );
+
+    for setting in t.keys().filter(|s| inverts_labels(s)) {
+        let by_var = &t[setting];
+        s += &format!("**2. Invert-label (`{setting}`): Equi at most the invariant bound, the CNN above it.** ");
+        let Some(&bound) = bounds.get(setting) else {
+            s += "The bound is unknown here: pass the datasets' directory (`--data`) to compute it.\n\n";
+            continue;
+        };
+        let vars: Vec<&str> = [EQUI, CNN, CNN_TRANS].into_iter().filter(|v| by_var.contains_key(*v)).collect();
+        let ns: std::collections::BTreeSet<usize> = vars.iter().flat_map(|v| by_var[*v].keys().copied()).collect();
+        s += &format!(
+            "Bound {:.1} %. Accuracy, and its distance to the bound in points:\n\n| N | {} |\n|---|{}\n",
+            100.0 * bound,
+            vars.join(" | "),
+            "---|".repeat(vars.len())
+        );
+        for n in &ns {
+            let row: Vec<String> = vars
+                .iter()
+                .map(|v| match by_var[*v].get(n) {
+                    Some(acc) => format!("{}: {:+.1}", cell(acc), points(mean_se(acc).0 - bound)),
+                    None => "–".into(),
+                })
+                .collect();
+            s += &format!("| {n} | {} |\n", row.join(" | "));
+        }
+        s += "\n";
+        for v in [EQUI, CNN] {
+            let Some(by_n) = by_var.get(v) else { continue };
+            let (above, under): (Vec<_>, Vec<_>) =
+                by_n.iter().partition(|(_, acc)| points(mean_se(acc).0 - bound) > 0.0);
+            let list = |cells: &[(&usize, &Vec<f64>)]| {
+                let v: Vec<String> = cells
+                    .iter()
+                    .map(|(n, acc)| {
+                        let (m, se) = mean_se(acc);
+                        let d = points(m - bound);
+                        if acc.len() >= 2 && se > 0.0 {
+                            format!("{n} ({d:+.1} points, {:.1} s.e.)", d.abs() / (100.0 * se))
+                        } else {
+                            format!("{n} ({d:+.1} points)")
+                        }
+                    })
+                    .collect();
+                if v.is_empty() { "no N".to_string() } else { format!("N = {}", v.join(", ")) }
+            };
+            s += &format!("{v}: above the bound at {}; at or under it at {}. ", list(&above), list(&under));
+        }
+        s.truncate(s.trim_end().len());
+        s += "\n\n";
+    }
+
+    let (table, cells) = diff_table(t, &settings, CNN_TRANS, EQUI);
+    let with_se: Vec<_> = cells.iter().filter(|c| c.2.se.is_some()).collect();
+    let close = with_se.iter().filter(|c| c.2.within_two_se() == Some(true)).count();
+    let mean = cells.iter().map(|c| c.2.points).sum::<f64>() / cells.len().max(1) as f64;
+    s += &format!(
+        "**3. CNN + trans close to Equi.** CNN + trans − Equi, points:\n\n{table}\n\
+         Within two standard errors of the difference in {close} of the {} cells with two seeds or more \
+         of both; further apart: {}. Mean difference over all {} cells: {mean:+.1} points.\n",
+        with_se.len(),
+        cell_list(with_se.iter().copied().filter(|c| c.2.within_two_se() == Some(false))),
+        cells.len(),
+    );
     s
 }
 
@@ -242,9 +426,10 @@ pub fn write(runs_dir: &Path, out: &Path, bounds: &BTreeMap<String, f64>) -> Res
     let text = format!(
         "# Rotation estimation: test accuracy at the best validation epoch\n\n\
          Generated by `equiarm rotest report` from {} run files; mean ± standard error over seeds in %, \
-         the number of seeds in parentheses.\n\n{}",
+         the number of seeds in parentheses.\n\n{}\n{}",
         runs.len(),
-        markdown(&t)
+        markdown(&t),
+        claims(&t, bounds)
     );
     std::fs::write(&md, text).map_err(io(&md))?;
     let mut kept: Vec<RunRecord> = runs.iter().map(|(_, r)| RunRecord { history: Vec::new(), ..r.clone() }).collect();
@@ -305,8 +490,13 @@ mod tests {
         let files = write(&root.join("runs"), &out, &bounds).unwrap();
         assert_eq!(files.len(), 3);
         let md = std::fs::read_to_string(out.join("rotest.md")).unwrap();
-        assert!(md.contains("| condition_reverse | 100 | 70.0 ± 0.0 (1) | – | 55.0 ± 5.0 (2) |"), "{md}");
-        assert!(md.contains("| condition_reverse | 400 | – | 80.0 ± 0.0 (1) | – |"), "{md}");
+        assert!(md.contains("| condition_reverse | 100 | 70.0 (1) | – | 55.0 ± 5.0 (2) |"), "{md}");
+        assert!(md.contains("| condition_reverse | 400 | – | 80.0 (1) | – |"), "{md}");
+        assert!(md.contains("| 100 | 55.0 ± 5.0 (2): -7.5 | 70.0 (1): +7.5 | – |"), "{md}");
+        assert!(
+            md.contains("Equi: above the bound at no N; at or under it at N = 100 (-7.5 points, 1.5 s.e.)."),
+            "{md}"
+        );
         assert!(image::open(out.join("rotest_condition_reverse.png")).is_ok());
         // the archive alone (no run directories) gives the same table
         let archived = read_archive(&out.join(ARCHIVE_FILE)).unwrap();
@@ -319,5 +509,58 @@ mod tests {
         let e = write(&root.join("empty"), &root.join("out2"), &bounds).unwrap_err().to_string();
         assert!(e.contains("no run.json") && e.contains("empty"), "{e}");
         let _ = std::fs::remove_dir_all(&root);
+    }
+
+    /// The claims: differences per setting and N with their standard errors, the cells where Equi
+    /// is not ahead, invert-label against its bound (and a missing bound said so), CNN + trans
+    /// against Equi.
+    #[test]
+    fn claims_compare_the_variants_cell_by_cell() {
+        let mut runs = Vec::new();
+        let mut add = |setting: &str, model, n, img_trans, accs: &[f64]| {
+            for (seed, &a) in accs.iter().enumerate() {
+                let mut r = record(model, n, img_trans, seed as u64, a);
+                r.corrupt = setting.into();
+                runs.push((PathBuf::from("x"), r));
+            }
+        };
+        // `none`: Equi clearly ahead at 100, behind at 400; CNN + trans close at 100, far at 400
+        add("none", ModelKind::Equi, 100, 0, &[0.80, 0.82]);
+        add("none", ModelKind::Cnn, 100, 0, &[0.40, 0.42]);
+        add("none", ModelKind::Cnn, 100, 100, &[0.79, 0.83]);
+        add("none", ModelKind::Equi, 400, 0, &[0.90]);
+        add("none", ModelKind::Cnn, 400, 0, &[0.95]);
+        // `grid`: equal means from different seeds (a tie, whatever the rounding of the sums)
+        add("grid", ModelKind::Equi, 100, 0, &[0.1, 0.2, 0.3]);
+        add("grid", ModelKind::Cnn, 100, 0, &[0.3, 0.2, 0.1]);
+        add("side,grid", ModelKind::Equi, 100, 0, &[0.70, 0.72]);
+        add("side,grid", ModelKind::Cnn, 100, 0, &[0.50, 0.52]);
+        add("side,grid", ModelKind::Cnn, 100, 100, &[0.50, 0.52]);
+        add("condition_reverse", ModelKind::Equi, 1600, 0, &[0.56, 0.62]);
+        add("condition_reverse", ModelKind::Cnn, 1600, 0, &[0.84, 0.90]);
+        let t = table(&runs);
+        let bounds = BTreeMap::from([("condition_reverse".to_string(), 0.625)]);
+        let c = claims(&t, &bounds);
+        assert!(c.contains("| none | +40.0 ± 1.4 | -5.0 |"), "{c}");
+        assert!(c.contains("| side,grid | +20.0 ± 1.4 | – |"), "{c}");
+        assert!(!c.contains("| condition_reverse |"), "{c}");
+        assert!(c.contains("| grid | +0.0 ± 8.2 | – |"), "{c}");
+        assert!(c.contains("above the CNN's in 2 of 4 cells (clearly in 2 of the 3"), "{c}");
+        assert!(c.contains("not above: `grid` N = 100 (+0.0 ± 8.2), `none` N = 400 (-5.0)."), "{c}");
+        assert!(c.contains("Bound 62.5 %. Accuracy, and its distance to the bound in points:\n\n| N | Equi | CNN |\n|---|---|---|\n| 1600 | 59.0 ± 3.0 (2): -3.5 | 87.0 ± 3.0 (2): +24.5 |\n"), "{c}");
+        assert!(c.contains("Equi: above the bound at no N; at or under it at N = 1600 (-3.5 points, 1.2 s.e.). CNN: above the bound at N = 1600 (+24.5 points, 8.2 s.e.); at or under it at no N."), "{c}");
+        assert!(
+            c.contains("| setting | N = 100 |\n|---|---|\n| none | +0.0 ± 2.2 |\n| side,grid | -20.0 ± 1.4 |\n"),
+            "{c}"
+        );
+        assert!(
+            c.contains(
+                "in 1 of the 2 cells with two seeds or more of both; further apart: `side,grid` N = 100 (-20.0 ± 1.4)."
+            ),
+            "{c}"
+        );
+        assert!(c.contains("Mean difference over all 2 cells: -10.0 points."), "{c}");
+        let c = claims(&t, &BTreeMap::new());
+        assert!(c.contains("The bound is unknown here"), "{c}");
     }
 }
