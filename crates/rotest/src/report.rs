@@ -91,7 +91,7 @@ fn cell(acc: &[f64]) -> String {
 }
 
 /// The Markdown table: one row per setting and training size, one column per variant, cells
-/// [`cell`]s in percent.
+/// `mean ± s.e. (seeds)` in percent (`mean (1)` for one seed).
 pub fn markdown(t: &Table) -> String {
     let mut variants: Vec<String> = t.values().flat_map(|v| v.keys().cloned()).collect();
     variants.sort();
