@@ -137,6 +137,13 @@ impl Diff {
         Diff { points: points(ma - mb), se }
     }
 
+    /// A cell's distance to a fixed accuracy (the invariant bound), with the cell's own standard
+    /// error when it has two seeds or more.
+    fn to_value(acc: &[f64], value: f64) -> Self {
+        let (m, se) = mean_se(acc);
+        Diff { points: points(m - value), se: (acc.len() >= 2).then_some(100.0 * se) }
+    }
+
     /// Whether the difference is within two of its standard errors of zero (`None` without one).
     fn within_two_se(self) -> Option<bool> {
         self.se.map(|se| self.points.abs() <= 2.0 * se)
@@ -169,19 +176,18 @@ fn diff_table(t: &Table, settings: &[&String], a: &str, b: &str) -> (String, Vec
         }
     }
     let ns: std::collections::BTreeSet<usize> = cells.iter().map(|c| c.1).collect();
+    let by_cell: BTreeMap<(&str, usize), Diff> = cells.iter().map(|(s, n, d)| ((s.as_str(), *n), *d)).collect();
     let mut s = format!(
         "| setting | {} |\n|---|{}\n",
         ns.iter().map(|n| format!("N = {n}")).collect::<Vec<_>>().join(" | "),
         "---|".repeat(ns.len())
     );
     for &setting in settings {
-        if !cells.iter().any(|c| &c.0 == setting) {
+        let row: Vec<String> =
+            ns.iter().map(|&n| by_cell.get(&(setting.as_str(), n)).map_or("–".to_string(), Diff::to_string)).collect();
+        if row.iter().all(|c| c == "–") {
             continue;
         }
-        let row: Vec<String> = ns
-            .iter()
-            .map(|n| cells.iter().find(|c| &c.0 == setting && c.1 == *n).map_or("–".to_string(), |c| c.2.to_string()))
-            .collect();
         s += &format!("| {setting} | {} |\n", row.join(" | "));
     }
     (s, cells)
@@ -234,7 +240,7 @@ pub fn claims(t: &Table, bounds: &BTreeMap<String, f64>) -> String {
             let row: Vec<String> = vars
                 .iter()
                 .map(|v| match by_var[*v].get(n) {
-                    Some(acc) => format!("{}: {:+.1}", cell(acc), points(mean_se(acc).0 - bound)),
+                    Some(acc) => format!("{}: {:+.1}", cell(acc), Diff::to_value(acc, bound).points),
                     None => "–".into(),
                 })
                 .collect();
@@ -244,18 +250,13 @@ pub fn claims(t: &Table, bounds: &BTreeMap<String, f64>) -> String {
         for v in [EQUI, CNN] {
             let Some(by_n) = by_var.get(v) else { continue };
             let (above, under): (Vec<_>, Vec<_>) =
-                by_n.iter().partition(|(_, acc)| points(mean_se(acc).0 - bound) > 0.0);
-            let list = |cells: &[(&usize, &Vec<f64>)]| {
+                by_n.iter().map(|(n, acc)| (*n, Diff::to_value(acc, bound))).partition(|(_, d)| d.points > 0.0);
+            let list = |cells: &[(usize, Diff)]| {
                 let v: Vec<String> = cells
                     .iter()
-                    .map(|(n, acc)| {
-                        let (m, se) = mean_se(acc);
-                        let d = points(m - bound);
-                        if acc.len() >= 2 && se > 0.0 {
-                            format!("{n} ({d:+.1} points, {:.1} s.e.)", d.abs() / (100.0 * se))
-                        } else {
-                            format!("{n} ({d:+.1} points)")
-                        }
+                    .map(|(n, d)| match d.se.filter(|&se| se > 0.0) {
+                        Some(se) => format!("{n} ({:+.1} points, {:.1} s.e.)", d.points, d.points.abs() / se),
+                        None => format!("{n} ({:+.1} points)", d.points),
                     })
                     .collect();
                 if v.is_empty() { "no N".to_string() } else { format!("N = {}", v.join(", ")) }
