@@ -1,6 +1,8 @@
 //! `equiarm`: the one command-line program of the suite. One subcommand per node or tool; each node
 //! subcommand only builds its runtime and calls into `equiarm_nodes`.
 
+use std::sync::atomic::Ordering;
+
 use anyhow::{Context as _, bail};
 use clap::{Parser, Subcommand};
 use equiarm_msgs::{ALL_TYPES, TypeInfo};
@@ -321,10 +323,18 @@ fn main() -> std::process::ExitCode {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Rotest(c) => equiarm_rotest::cli::run(c)?,
+        Command::Rotest(c) => {
+            // Only the grid stops between runs on a signal; the other subcommands keep the default
+            // action (end at once).
+            let stop = c.is_grid().then(|| equiarm_nodes::signals::stop_flag(equiarm_rotest::cli::GRID_STOP));
+            let code = equiarm_rotest::cli::run(c, &|| stop.as_ref().is_some_and(|s| s.load(Ordering::Relaxed)))?;
+            if code != 0 {
+                std::process::exit(code);
+            }
+        }
         Command::Experiment(c) => {
-            let stop = equiarm_nodes::signals::stop_flag();
-            let code = equiarm_experiment::cli::run(c, &move || stop.load(std::sync::atomic::Ordering::Relaxed))?;
+            let stop = equiarm_nodes::signals::stop_flag(equiarm_nodes::signals::CHECKPOINT_AND_STOP);
+            let code = equiarm_experiment::cli::run(c, &move || stop.load(Ordering::Relaxed))?;
             if code != 0 {
                 std::process::exit(code);
             }

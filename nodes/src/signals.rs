@@ -96,9 +96,13 @@ pub async fn shutdown_signal() -> anyhow::Result<&'static str> {
     Ok(got.unwrap_or("a signal"))
 }
 
-/// A flag that turns true on SIGINT or SIGTERM (a helper thread waits for the signal). Without a
-/// listener (which [`install`] reports) it stays false and the default actions apply.
-pub fn stop_flag() -> Arc<AtomicBool> {
+/// What a training run does on its first SIGINT or SIGTERM (the [`stop_flag`] message).
+pub const CHECKPOINT_AND_STOP: &str = "stopping after the current step and writing a checkpoint";
+
+/// A flag that turns true on SIGINT or SIGTERM (a helper thread waits for the signal, then logs
+/// `what`, what the process does about it). Without a listener (which [`install`] reports) it stays
+/// false and the default actions apply.
+pub fn stop_flag(what: &'static str) -> Arc<AtomicBool> {
     let stop = Arc::new(AtomicBool::new(false));
     let mut rx = match install() {
         Ok(rx) => rx,
@@ -110,7 +114,7 @@ pub fn stop_flag() -> Arc<AtomicBool> {
     let flag = stop.clone();
     let waiter = std::thread::Builder::new().name("stop-flag".into()).spawn(move || {
         if let Ok(Some(sig)) = futures::executor::block_on(rx.wait_for(Option::is_some)).map(|s| *s) {
-            log::info!("{sig}: stopping after the current step and writing a checkpoint");
+            log::info!("{sig}: {what}");
             flag.store(true, Ordering::Relaxed);
         }
     });
@@ -128,7 +132,7 @@ mod tests {
     /// process lives on, and the wait that starts later ends at once with the signal's name.
     #[test]
     fn a_signal_before_the_wait_is_not_lost() {
-        let stop = stop_flag();
+        let stop = stop_flag(CHECKPOINT_AND_STOP);
         let rx = install().unwrap();
         assert!(rx.borrow().is_none());
         let pid = std::process::id().to_string();

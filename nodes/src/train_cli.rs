@@ -14,7 +14,7 @@ use equiarm_sac::config::{Augmentation, Preset, TrainConfig};
 use equiarm_train::inprocess::RunOptions;
 use equiarm_train::record::RunSummary;
 
-use crate::signals::stop_flag;
+use crate::signals::{CHECKPOINT_AND_STOP, stop_flag};
 
 /// Options of `equiarm train`.
 #[derive(Clone, Debug, clap::Args)]
@@ -228,7 +228,7 @@ pub fn run_in_process(args: &TrainArgs, cfg: TrainConfig) -> anyhow::Result<RunS
             "--deterministic is for the trainer node over DDS; the in-process loop (--in-process) is deterministic already"
         );
     }
-    let stop = stop_flag();
+    let stop = stop_flag(CHECKPOINT_AND_STOP);
     let resume = match &args.resume {
         Some(p) => Some(equiarm_train::rundir::find_checkpoint(p)?),
         None => None,

@@ -25,7 +25,7 @@ use log::{info, warn};
 use tokio::task::JoinHandle;
 
 use crate::ros::{Publisher, RosNode, RosOptions, Subscriber, qos};
-use crate::signals::stop_flag;
+use crate::signals::{CHECKPOINT_AND_STOP, stop_flag};
 use crate::train_cli::TrainArgs;
 
 type Update = JoinHandle<(Learner, Result<Metrics, LearnerError>)>;
@@ -185,7 +185,7 @@ async fn wait_for_sims(n: &mut Node, envs: &[String], stop: &AtomicBool) -> anyh
 
 /// Runs the trainer node until `total_updates`, a signal or the idle timeout.
 pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyhow::Result<RunSummary> {
-    let stop = stop_flag(); // first: a signal while the run opens is then not lost
+    let stop = stop_flag(CHECKPOINT_AND_STOP); // first: a signal while the run opens is then not lost
     let options = TrainerOptions {
         run_dir: args.run_dir(),
         resume: args.resume.clone(),

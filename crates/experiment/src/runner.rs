@@ -361,7 +361,7 @@ fn finished(r: &Running, status: std::process::ExitStatus, summary: &mut RunnerS
 }
 
 /// The exit status of a child stopped before its run finished (a checkpoint was written).
-pub const STOPPED_EXIT: i32 = 3;
+pub use equiarm_train::STOPPED_EXIT;
 
 fn spawn(opts: &RunnerOptions, grid: &Grid, dir: &Path) -> Result<Child> {
     let log_path = dir.join(LOG_FILE);

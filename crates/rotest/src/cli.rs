@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use equiarm_nn::kernels::MatmulPrecision;
 use equiarm_sim::rotest::{Corruptions, PAPER_SETTINGS, PairConfig};
+use equiarm_train::STOPPED_EXIT;
 
 use crate::bound::dataset_bound;
 use crate::dataset::Dataset;
@@ -94,7 +95,9 @@ pub enum RotestCommand {
     /// for each N and seed whose
     /// `RUNS/<setting>/<variant>/<N>/s<seed>/run.json` does not exist yet and that the report's
     /// archive (`REPORT/rotest_runs.json`) does not hold (so an interrupted grid continues where it
-    /// stopped, on this machine or from a committed report), then write the report.
+    /// stopped, on this machine or from a committed report), then write the report. Ctrl-C (or
+    /// SIGTERM) stops it after the run in training, without the report, with exit status 3; a
+    /// second one at once, and that run starts again next time.
     #[command(
         after_help = "Example (a short schedule for 2 cores):\n  equiarm rotest grid --data data/rotest --runs runs/rotest --sizes 100,400 --seeds 0,1,2,3 --lr 1e-3 --min-epochs 20 --patience 20 --max-epochs 100"
     )]
@@ -296,8 +299,23 @@ fn bounds_of(root: &std::path::Path) -> Result<BTreeMap<String, f64>> {
     Ok(bounds)
 }
 
-/// Runs one subcommand, printing its results to stdout and progress to stderr.
-pub fn run(cmd: RotestCommand) -> Result<()> {
+/// What `rotest grid` does on its first SIGINT or SIGTERM: `stop` turns true, and the grid ends
+/// once the run in training is finished.
+pub const GRID_STOP: &str = "stopping after the run in training (again to exit now and lose that run)";
+
+impl RotestCommand {
+    /// Whether this is `rotest grid`, the one subcommand that stops between runs when asked
+    /// ([`run`]'s `stop`); the others end at once on a signal, losing nothing finished.
+    pub fn is_grid(&self) -> bool {
+        matches!(self, RotestCommand::Grid { .. })
+    }
+}
+
+/// Runs one subcommand, printing its results to stdout and progress to stderr. Returns the exit
+/// status: 0, or [`STOPPED_EXIT`] when `rotest grid` saw `stop()` before its last run (it finishes
+/// the run in training first, keeps every finished run and writes no report; the same command
+/// continues).
+pub fn run(cmd: RotestCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
     match cmd {
         RotestCommand::Data { corrupt, pairs, seed, size, supersample, out } => {
             let cfg = PairConfig { size, supersample, corruptions: Corruptions::parse(&corrupt)? };
@@ -364,9 +382,21 @@ pub fn run(cmd: RotestCommand) -> Result<()> {
                 .into_iter()
                 .map(|r| (crate::report::run_key(&r), r.config))
                 .collect();
+            let mut trained = 0usize;
+            let stopped = |next: &std::path::Path, trained: usize| {
+                println!(
+                    "stopped before {}: {trained} runs trained by this command, the rest not started and the \
+                     report not written; the same command continues",
+                    next.display()
+                );
+                STOPPED_EXIT
+            };
             for c in &list {
                 let stem = setting_file_stem(c);
                 let dir = data.join(&stem);
+                if stop() {
+                    return Ok(stopped(&dir, trained));
+                }
                 if !dir.join(crate::dataset::FILE_NAME).is_file() {
                     let ds = generate(&PairConfig { size: 152, supersample: 2, corruptions: c.clone() }, pairs, 0)?;
                     println!("{}", ds.write(&dir)?.display());
@@ -395,7 +425,11 @@ pub fn run(cmd: RotestCommand) -> Result<()> {
                             if archived.get(&crate::report::run_key(&planned)) == Some(&cfg) {
                                 continue;
                             }
+                            if stop() {
+                                return Ok(stopped(&out, trained));
+                            }
                             let r = crate::train::run(&ds, &cfg, &device, &out, &mut |_| {})?;
+                            trained += 1;
                             println!("{}", summary(&r));
                         }
                     }
@@ -432,5 +466,5 @@ pub fn run(cmd: RotestCommand) -> Result<()> {
             }
         }
     }
-    Ok(())
+    Ok(0)
 }

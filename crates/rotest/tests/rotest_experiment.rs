@@ -217,14 +217,14 @@ fn early_stopping_waits_for_patience_after_min_epochs_and_reports_the_best_epoch
     }
 }
 
-/// `rotest grid --variants cnn` trains the CNN alone, writes the report, and skips the run the
-/// second time; an empty list of variants is refused naming the flag.
-#[test]
-fn the_grid_trains_only_the_variants_named_and_skips_finished_runs() {
-    use equiarm_rotest::cli::{RotestCommand, TrainOpts, Variant, run};
-    let root = scratch("grid_variants");
-    data("none", 19, 12, 7).write(&root.join("data").join("none")).unwrap();
-    let opts = TrainOpts {
+/// `rotest grid` at toy sizes over `root/data` (one setting, `none`, N = 4) into `root/runs`, its
+/// report into `root/report`.
+fn tiny_grid(
+    root: &std::path::Path,
+    variants: Vec<equiarm_rotest::cli::Variant>,
+    seeds: Vec<u64>,
+) -> equiarm_rotest::cli::RotestCommand {
+    let opts = equiarm_rotest::cli::TrainOpts {
         no_crop: false,
         paper: false,
         hidden: Some(8),
@@ -239,18 +239,28 @@ fn the_grid_trains_only_the_variants_named_and_skips_finished_runs() {
         device: "cpu".into(),
         matmul: Default::default(),
     };
-    let grid = |variants: Vec<Variant>| RotestCommand::Grid {
+    equiarm_rotest::cli::RotestCommand::Grid {
         data: root.join("data"),
         runs: root.join("runs"),
         settings: "none".into(),
         sizes: vec![4],
-        seeds: vec![0],
+        seeds,
         variants,
         pairs: 12,
-        opts: opts.clone(),
+        opts,
         report: root.join("report"),
-    };
-    run(grid(vec![Variant::Cnn])).unwrap();
+    }
+}
+
+/// `rotest grid --variants cnn` trains the CNN alone, writes the report, and skips the run the
+/// second time; an empty list of variants is refused naming the flag.
+#[test]
+fn the_grid_trains_only_the_variants_named_and_skips_finished_runs() {
+    use equiarm_rotest::cli::{Variant, run};
+    let root = scratch("grid_variants");
+    data("none", 19, 12, 7).write(&root.join("data").join("none")).unwrap();
+    let grid = |variants: Vec<Variant>| tiny_grid(&root, variants, vec![0]);
+    assert_eq!(run(grid(vec![Variant::Cnn]), &|| false).unwrap(), 0);
     let runs = root.join("runs").join("none");
     let cnn = runs.join("cnn").join("4").join("s0").join("run.json");
     assert!(cnn.is_file());
@@ -258,8 +268,39 @@ fn the_grid_trains_only_the_variants_named_and_skips_finished_runs() {
     let table = std::fs::read_to_string(root.join("report").join("rotest.md")).unwrap();
     assert!(table.contains("| none | 4 |"), "{table}");
     let written = std::fs::metadata(&cnn).unwrap().modified().unwrap();
-    run(grid(vec![Variant::Cnn])).unwrap();
+    run(grid(vec![Variant::Cnn]), &|| false).unwrap();
     assert_eq!(std::fs::metadata(&cnn).unwrap().modified().unwrap(), written, "a finished run was trained again");
-    let err = run(grid(vec![])).unwrap_err().to_string();
+    let err = run(grid(vec![]), &|| false).unwrap_err().to_string();
     assert!(err.contains("--variants"), "{err}");
+}
+
+/// Asked to stop (SIGINT/SIGTERM in `equiarm rotest grid`), the grid finishes the run in training,
+/// starts no other, writes no report and returns the stopped status; the same command then trains
+/// only the runs left and writes the report.
+#[test]
+fn a_stopped_grid_keeps_its_finished_runs_and_the_same_command_continues() {
+    use equiarm_rotest::cli::{Variant, run};
+    use equiarm_train::STOPPED_EXIT;
+    let root = scratch("grid_stop");
+    data("none", 19, 12, 7).write(&root.join("data").join("none")).unwrap();
+    let seed_dir = |s: u64| root.join("runs").join("none").join("cnn").join("4").join(format!("s{s}"));
+    // the stop comes while seed 0 trains, so it is seen before seed 1
+    let asked = std::cell::Cell::new(0);
+    let stop = || {
+        asked.set(asked.get() + 1);
+        seed_dir(0).join("run.json").is_file()
+    };
+    let grid = || tiny_grid(&root, vec![Variant::Cnn], vec![0, 1, 2]);
+    assert_eq!(run(grid(), &stop).unwrap(), STOPPED_EXIT);
+    // asked before the setting's dataset, before seed 0 and before seed 1
+    assert_eq!(asked.get(), 3);
+    assert!(seed_dir(0).join("run.json").is_file());
+    assert!(!seed_dir(1).exists() && !seed_dir(2).exists(), "a run was started after the stop");
+    assert!(!root.join("report").exists(), "a stopped grid wrote a report");
+    let written = std::fs::metadata(seed_dir(0).join("run.json")).unwrap().modified().unwrap();
+    assert_eq!(run(grid(), &|| false).unwrap(), 0);
+    assert!(seed_dir(1).join("run.json").is_file() && seed_dir(2).join("run.json").is_file());
+    assert_eq!(std::fs::metadata(seed_dir(0).join("run.json")).unwrap().modified().unwrap(), written);
+    let table = std::fs::read_to_string(root.join("report").join("rotest.md")).unwrap();
+    assert!(table.lines().any(|l| l.starts_with("| none | 4 |") && l.ends_with("(3) |")), "{table}");
 }

@@ -24,6 +24,11 @@ use std::path::{Path, PathBuf};
 
 use thiserror::Error;
 
+/// The exit status of a command stopped by SIGINT or SIGTERM before its work was all done, with
+/// what it had finished kept (a run's checkpoint, a grid's finished runs): the same command
+/// continues it.
+pub const STOPPED_EXIT: i32 = 3;
+
 pub mod bag_report;
 pub mod config;
 pub mod device_check;
