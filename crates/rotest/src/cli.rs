@@ -1,4 +1,5 @@
-//! The `equiarm rotest` subcommands (clap derive): `data`, `snapshots`, `bound`, `train`, `report`.
+//! The `equiarm rotest` subcommands (clap derive): `data`, `snapshots`, `bound`, `train`, `grid`,
+//! `status`, `invariance`, `report`.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -6,12 +7,12 @@ use std::time::Instant;
 
 use equiarm_nn::kernels::MatmulPrecision;
 use equiarm_sim::rotest::{Corruptions, PAPER_SETTINGS, PairConfig};
-use equiarm_train::STOPPED_EXIT;
 
 use crate::bound::dataset_bound;
 use crate::dataset::Dataset;
 use crate::error::Result;
 use crate::generate::{generate, setting_file_stem, write_snapshot};
+use crate::grid::GridArgs;
 use crate::train::{ModelKind, TrainConfig};
 
 /// `equiarm rotest …`.
@@ -101,35 +102,13 @@ pub enum RotestCommand {
     #[command(
         after_help = "Example (a short schedule for 2 cores):\n  equiarm rotest grid --data data/rotest --runs runs/rotest --sizes 100,400 --seeds 0,1,2,3 --lr 1e-3 --min-epochs 20 --patience 20 --max-epochs 100"
     )]
-    Grid {
-        /// Directory of the datasets (one subdirectory per setting, commas written as +).
-        #[arg(long)]
-        data: PathBuf,
-        /// Directory of the runs.
-        #[arg(long)]
-        runs: PathBuf,
-        /// Settings, separated by `;` (each a comma-separated list of flags), or `all` for the 15.
-        #[arg(long, default_value = "all")]
-        settings: String,
-        /// Training-set sizes N.
-        #[arg(long, value_delimiter = ',', default_value = "100,400,1600")]
-        sizes: Vec<usize>,
-        /// Seeds.
-        #[arg(long, value_delimiter = ',', default_value = "0,1,2,3")]
-        seeds: Vec<u64>,
-        /// The networks to train (e.g. `cnn` alone for a size only the CNN is run at).
-        #[arg(long, value_delimiter = ',', default_value = "equi,cnn,cnn+trans")]
-        variants: Vec<Variant>,
-        /// Pairs per generated dataset.
-        #[arg(long, default_value_t = 2000)]
-        pairs: usize,
-        /// The schedule, the network size and the device.
-        #[command(flatten)]
-        opts: TrainOpts,
-        /// Where the report goes.
-        #[arg(long, default_value = "docs/results")]
-        report: PathBuf,
-    },
+    Grid(GridArgs),
+    /// Where each run of a grid stands (the same options as `grid`): per setting the runs finished
+    /// here, archived in the report, unfinished and not started; then each run still to train.
+    #[command(
+        after_help = "Example:\n  equiarm rotest status --data data/rotest --runs runs/rotest --sizes 100,400 --seeds 0,1,2,3 --lr 1e-3 --min-epochs 20 --patience 20 --max-epochs 100"
+    )]
+    Status(GridArgs),
     /// Evaluate a finished run's best weights on its test split with both images rotated by k·45°:
     /// the fraction of predictions unchanged, and the accuracy, for each k.
     Invariance {
@@ -268,7 +247,7 @@ fn print_epoch(e: &crate::train::EpochRecord) {
     );
 }
 
-fn summary(r: &crate::train::RunRecord) -> String {
+pub(crate) fn summary(r: &crate::train::RunRecord) -> String {
     let secs: f64 = r.history.iter().map(|e| e.seconds).sum();
     format!(
         "{} {:?} N={} img-trans {} seed {}: test accuracy {:.4} at best validation epoch {} (val {:.4}); {} epochs, {:.1} s/epoch",
@@ -286,7 +265,7 @@ fn summary(r: &crate::train::RunRecord) -> String {
 }
 
 /// The invariant bound of each setting whose dataset is in `root` (as `grid` and `data -o` name them).
-fn bounds_of(root: &std::path::Path) -> Result<BTreeMap<String, f64>> {
+pub(crate) fn bounds_of(root: &std::path::Path) -> Result<BTreeMap<String, f64>> {
     let mut bounds = BTreeMap::new();
     for s in PAPER_SETTINGS {
         let c = Corruptions::parse(s)?;
@@ -312,7 +291,7 @@ impl RotestCommand {
 }
 
 /// Runs one subcommand, printing its results to stdout and progress to stderr. Returns the exit
-/// status: 0, or [`STOPPED_EXIT`] when `rotest grid` saw `stop()` before its last run (it finishes
+/// status: 0, or [`STOPPED_EXIT`](equiarm_train::STOPPED_EXIT) when `rotest grid` saw `stop()` before its last run (it finishes
 /// the run in training first, keeps every finished run and writes no report; the same command
 /// continues).
 pub fn run(cmd: RotestCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
@@ -359,86 +338,8 @@ pub fn run(cmd: RotestCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
             let r = crate::train::run(&ds, &cfg, &device, &out, &mut print_epoch)?;
             println!("{}", summary(&r));
         }
-        RotestCommand::Grid { data, runs, settings, sizes, seeds, variants, pairs, opts, report } => {
-            let list: Vec<Corruptions> = if settings.trim() == "all" {
-                PAPER_SETTINGS.iter().map(|s| Corruptions::parse(s)).collect::<Result<_, _>>()?
-            } else {
-                settings.split(';').map(Corruptions::parse).collect::<Result<_, _>>()?
-            };
-            if sizes.is_empty() || seeds.is_empty() || variants.is_empty() {
-                return Err(crate::RotestError::Config {
-                    field: "--sizes/--seeds/--variants",
-                    message: "need at least one of each".into(),
-                });
-            }
-            // Check every configuration before the first run.
-            for &n in &sizes {
-                let cfg = opts.config(ModelKind::Cnn, n, n, 0)?;
-                crate::train::split(pairs, &cfg)?;
-            }
-            let device = equiarm_nn::device::open(&opts.device)?;
-            // The runs a committed report holds (read once: the grid writes the report only at the end).
-            let archived: BTreeMap<_, _> = crate::report::read_archive(&report.join(crate::report::ARCHIVE_FILE))?
-                .into_iter()
-                .map(|r| (crate::report::run_key(&r), r.config))
-                .collect();
-            let mut trained = 0usize;
-            let stopped = |next: &std::path::Path, trained: usize| {
-                println!(
-                    "stopped before {}: {trained} runs trained by this command, the rest not started and the \
-                     report not written; the same command continues",
-                    next.display()
-                );
-                STOPPED_EXIT
-            };
-            for c in &list {
-                let stem = setting_file_stem(c);
-                let dir = data.join(&stem);
-                if stop() {
-                    return Ok(stopped(&dir, trained));
-                }
-                if !dir.join(crate::dataset::FILE_NAME).is_file() {
-                    let ds = generate(&PairConfig { size: 152, supersample: 2, corruptions: c.clone() }, pairs, 0)?;
-                    println!("{}", ds.write(&dir)?.display());
-                }
-                let ds = Dataset::read(&dir, None)?;
-                for &n in &sizes {
-                    for &seed in &seeds {
-                        for &variant in &variants {
-                            let (model, img_trans) = variant.model(n);
-                            let out =
-                                runs.join(&stem).join(variant.name()).join(n.to_string()).join(format!("s{seed}"));
-                            if out.join("run.json").is_file() {
-                                continue;
-                            }
-                            let cfg = opts.config(model, n, img_trans, seed)?;
-                            let planned = crate::train::RunRecord {
-                                config: cfg.clone(),
-                                corrupt: c.name(),
-                                data_seed: 0,
-                                history: Vec::new(),
-                                best_epoch: 0,
-                                best_val_acc: 0.0,
-                                test_acc: 0.0,
-                                train_samples: 0,
-                            };
-                            if archived.get(&crate::report::run_key(&planned)) == Some(&cfg) {
-                                continue;
-                            }
-                            if stop() {
-                                return Ok(stopped(&out, trained));
-                            }
-                            let r = crate::train::run(&ds, &cfg, &device, &out, &mut |_| {})?;
-                            trained += 1;
-                            println!("{}", summary(&r));
-                        }
-                    }
-                }
-            }
-            for f in crate::report::write(&runs, &report, &bounds_of(&data)?)? {
-                println!("{}", f.display());
-            }
-        }
+        RotestCommand::Grid(args) => return crate::grid::run(&args, stop),
+        RotestCommand::Status(args) => print!("{}", crate::grid::status(&args)?),
         RotestCommand::Invariance { data, run, disc } => {
             let ds = Dataset::read(&data, None)?;
             let cpu = equiarm_nn::device::cpu();

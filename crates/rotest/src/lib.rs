@@ -10,6 +10,7 @@
 //!   snapshot PNGs.
 //! - [`bound`]: the upper bound on the accuracy of an invariant classifier.
 //! - [`train`]: training and evaluation, the run file.
+//! - [`grid`]: the experiment's grid of runs: where each stands, training those left.
 //! - [`report`]: the table and figures over many runs.
 //! - [`cli`]: the `equiarm rotest` subcommands.
 
@@ -18,6 +19,7 @@ pub mod cli;
 pub mod dataset;
 pub mod error;
 pub mod generate;
+pub mod grid;
 pub mod report;
 pub mod train;
 

@@ -13,7 +13,7 @@ use plotters::prelude::*;
 use equiarm_sim::rotest::Corruption;
 
 use crate::error::{Result, RotestError, io};
-use crate::train::{ModelKind, RunRecord};
+use crate::train::{ModelKind, RunRecord, TrainConfig};
 
 /// The variant name of the C8 network.
 pub const EQUI: &str = "Equi";
@@ -25,13 +25,18 @@ pub const CNN_TRANS: &str = "CNN + trans";
 /// Name of a run's variant: [`EQUI`], [`CNN`] or [`CNN_TRANS`] (or `Equi + trans`), with
 /// ` (no crop)` when crops were off.
 pub fn variant(r: &RunRecord) -> String {
-    let base = match (r.config.model, r.config.img_trans > 0) {
+    variant_of(&r.config)
+}
+
+/// [`variant`] of a run's configuration.
+pub fn variant_of(cfg: &TrainConfig) -> String {
+    let base = match (cfg.model, cfg.img_trans > 0) {
         (ModelKind::Equi, false) => EQUI,
         (ModelKind::Equi, true) => "Equi + trans",
         (ModelKind::Cnn, false) => CNN,
         (ModelKind::Cnn, true) => CNN_TRANS,
     };
-    if r.config.crop { base.to_string() } else { format!("{base} (no crop)") }
+    if cfg.crop { base.to_string() } else { format!("{base} (no crop)") }
 }
 
 /// Every `run.json` below `dir` (recursively), sorted by path. A file that does not parse is an
@@ -389,7 +394,12 @@ pub const ARCHIVE_FILE: &str = "rotest_runs.json";
 
 /// The key that names a run in the grid: setting, variant, training pairs, seed.
 pub fn run_key(r: &RunRecord) -> (String, String, usize, u64) {
-    (r.corrupt.clone(), variant(r), r.config.train_pairs, r.config.seed)
+    key(&r.corrupt, &r.config)
+}
+
+/// [`run_key`] of a run of setting `corrupt` with configuration `cfg`, before it has run.
+pub fn key(corrupt: &str, cfg: &TrainConfig) -> (String, String, usize, u64) {
+    (corrupt.to_string(), variant_of(cfg), cfg.train_pairs, cfg.seed)
 }
 
 /// The archived runs in `path` (none if the file does not exist).

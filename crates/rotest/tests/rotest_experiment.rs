@@ -224,6 +224,15 @@ fn tiny_grid(
     variants: Vec<equiarm_rotest::cli::Variant>,
     seeds: Vec<u64>,
 ) -> equiarm_rotest::cli::RotestCommand {
+    equiarm_rotest::cli::RotestCommand::Grid(grid_args(root, variants, seeds))
+}
+
+/// The options of [`tiny_grid`] (what `rotest status` takes too).
+fn grid_args(
+    root: &std::path::Path,
+    variants: Vec<equiarm_rotest::cli::Variant>,
+    seeds: Vec<u64>,
+) -> equiarm_rotest::grid::GridArgs {
     let opts = equiarm_rotest::cli::TrainOpts {
         no_crop: false,
         paper: false,
@@ -239,7 +248,7 @@ fn tiny_grid(
         device: "cpu".into(),
         matmul: Default::default(),
     };
-    equiarm_rotest::cli::RotestCommand::Grid {
+    equiarm_rotest::grid::GridArgs {
         data: root.join("data"),
         runs: root.join("runs"),
         settings: "none".into(),
@@ -276,10 +285,12 @@ fn the_grid_trains_only_the_variants_named_and_skips_finished_runs() {
 
 /// Asked to stop (SIGINT/SIGTERM in `equiarm rotest grid`), the grid finishes the run in training,
 /// starts no other, writes no report and returns the stopped status; the same command then trains
-/// only the runs left and writes the report.
+/// only the runs left and writes the report. `rotest status` says where each run stands: finished
+/// here, unfinished (a directory without `run.json`), not started, or archived in the report.
 #[test]
 fn a_stopped_grid_keeps_its_finished_runs_and_the_same_command_continues() {
     use equiarm_rotest::cli::{Variant, run};
+    use equiarm_rotest::grid::status;
     use equiarm_train::STOPPED_EXIT;
     let root = scratch("grid_stop");
     data("none", 19, 12, 7).write(&root.join("data").join("none")).unwrap();
@@ -297,10 +308,23 @@ fn a_stopped_grid_keeps_its_finished_runs_and_the_same_command_continues() {
     assert!(seed_dir(0).join("run.json").is_file());
     assert!(!seed_dir(1).exists() && !seed_dir(2).exists(), "a run was started after the stop");
     assert!(!root.join("report").exists(), "a stopped grid wrote a report");
+    std::fs::create_dir_all(seed_dir(1)).unwrap();
+    let args = grid_args(&root, vec![Variant::Cnn], vec![0, 1, 2]);
+    let text = status(&args).unwrap();
+    assert!(text.contains("none: 1 finished here, 0 archived in "), "{text}");
+    assert!(text.contains(", 1 unfinished (cut short, or in training now), 1 not started\n"), "{text}");
+    assert!(text.contains("all 3 runs: 1 finished here, 0 archived in "), "{text}");
+    assert!(text.contains(&format!("unfinished: {}\n", seed_dir(1).display())), "{text}");
+    assert!(text.contains(&format!("not started: {}\n", seed_dir(2).display())), "{text}");
     let written = std::fs::metadata(seed_dir(0).join("run.json")).unwrap().modified().unwrap();
     assert_eq!(run(grid(), &|| false).unwrap(), 0);
     assert!(seed_dir(1).join("run.json").is_file() && seed_dir(2).join("run.json").is_file());
     assert_eq!(std::fs::metadata(seed_dir(0).join("run.json")).unwrap().modified().unwrap(), written);
     let table = std::fs::read_to_string(root.join("report").join("rotest.md")).unwrap();
     assert!(table.lines().any(|l| l.starts_with("| none | 4 |") && l.ends_with("(3) |")), "{table}");
+    // on another machine (no runs directory) the report's archive holds them all
+    std::fs::remove_dir_all(root.join("runs")).unwrap();
+    let text = status(&args).unwrap();
+    assert!(text.contains("all 3 runs: 0 finished here, 3 archived in "), "{text}");
+    assert!(text.contains(", 0 unfinished (cut short, or in training now), 0 not started\n"), "{text}");
 }

@@ -1,0 +1,223 @@
+//! The experiment's grid (`equiarm rotest grid` and `status`): every setting × training size ×
+//! seed × variant, which of those runs are finished (here, or in a committed report's archive) and
+//! which are still to train, and training the rest.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use equiarm_sim::rotest::{Corruptions, PAPER_SETTINGS, PairConfig};
+use equiarm_train::STOPPED_EXIT;
+
+use crate::cli::{TrainOpts, Variant};
+use crate::dataset::Dataset;
+use crate::error::{Result, RotestError};
+use crate::generate::{generate, setting_file_stem};
+use crate::train::TrainConfig;
+
+/// What names a grid: where its datasets, runs and report are, and which runs it holds.
+#[derive(Clone, Debug, clap::Args)]
+pub struct GridArgs {
+    /// Directory of the datasets (one subdirectory per setting, commas written as +).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Directory of the runs.
+    #[arg(long)]
+    pub runs: PathBuf,
+    /// Settings, separated by `;` (each a comma-separated list of flags), or `all` for the 15.
+    #[arg(long, default_value = "all")]
+    pub settings: String,
+    /// Training-set sizes N.
+    #[arg(long, value_delimiter = ',', default_value = "100,400,1600")]
+    pub sizes: Vec<usize>,
+    /// Seeds.
+    #[arg(long, value_delimiter = ',', default_value = "0,1,2,3")]
+    pub seeds: Vec<u64>,
+    /// The networks to train (e.g. `cnn` alone for a size only the CNN is run at).
+    #[arg(long, value_delimiter = ',', default_value = "equi,cnn,cnn+trans")]
+    pub variants: Vec<Variant>,
+    /// Pairs per generated dataset.
+    #[arg(long, default_value_t = 2000)]
+    pub pairs: usize,
+    /// The schedule, the network size and the device.
+    #[command(flatten)]
+    pub opts: TrainOpts,
+    /// Where the report goes.
+    #[arg(long, default_value = "docs/results")]
+    pub report: PathBuf,
+}
+
+/// Where one run of the grid stands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RunState {
+    /// Its `run.json` is in the runs directory.
+    Finished,
+    /// The report's archive holds it, with the same configuration.
+    Archived,
+    /// Its directory exists without a `run.json`: cut short (it trains again from the start), or
+    /// in training now.
+    Unfinished,
+    /// Not started.
+    New,
+}
+
+impl RunState {
+    /// Whether the grid still has to train it.
+    pub fn to_train(self) -> bool {
+        matches!(self, RunState::Unfinished | RunState::New)
+    }
+}
+
+/// One run of the grid.
+#[derive(Clone, Debug)]
+pub struct PlannedRun {
+    /// Its setting.
+    pub setting: Corruptions,
+    /// Its variant.
+    pub variant: Variant,
+    /// `RUNS/<setting>/<variant>/<N>/s<seed>`.
+    pub dir: PathBuf,
+    /// What it trains.
+    pub cfg: TrainConfig,
+    /// Where it stands.
+    pub state: RunState,
+}
+
+impl GridArgs {
+    /// The settings named, checked.
+    pub fn settings(&self) -> Result<Vec<Corruptions>> {
+        let list: Vec<Corruptions> = if self.settings.trim() == "all" {
+            PAPER_SETTINGS.iter().map(|s| Corruptions::parse(s)).collect::<std::result::Result<_, _>>()?
+        } else {
+            self.settings.split(';').map(Corruptions::parse).collect::<std::result::Result<_, _>>()?
+        };
+        Ok(list)
+    }
+
+    /// Every run of the grid, setting by setting, then by size, seed and variant, with its state
+    /// (every option checked first).
+    pub fn plan(&self) -> Result<Vec<PlannedRun>> {
+        let settings = self.settings()?;
+        if self.sizes.is_empty() || self.seeds.is_empty() || self.variants.is_empty() {
+            return Err(RotestError::Config {
+                field: "--sizes/--seeds/--variants",
+                message: "need at least one of each".into(),
+            });
+        }
+        for &n in &self.sizes {
+            let cfg = self.opts.config(crate::train::ModelKind::Cnn, n, n, 0)?;
+            crate::train::split(self.pairs, &cfg)?;
+        }
+        // The runs a committed report holds (read once: the grid writes the report only at the end).
+        let archived: BTreeMap<_, _> = crate::report::read_archive(&self.report.join(crate::report::ARCHIVE_FILE))?
+            .into_iter()
+            .map(|r| (crate::report::run_key(&r), r.config))
+            .collect();
+        let mut plan = Vec::new();
+        for c in settings {
+            let stem = setting_file_stem(&c);
+            for &n in &self.sizes {
+                for &seed in &self.seeds {
+                    for &variant in &self.variants {
+                        let (model, img_trans) = variant.model(n);
+                        let dir =
+                            self.runs.join(&stem).join(variant.name()).join(n.to_string()).join(format!("s{seed}"));
+                        let cfg = self.opts.config(model, n, img_trans, seed)?;
+                        let key = crate::report::key(&c.name(), &cfg);
+                        let state = if dir.join("run.json").is_file() {
+                            RunState::Finished
+                        } else if archived.get(&key) == Some(&cfg) {
+                            RunState::Archived
+                        } else if dir.exists() {
+                            RunState::Unfinished
+                        } else {
+                            RunState::New
+                        };
+                        plan.push(PlannedRun { setting: c.clone(), variant, dir, cfg, state });
+                    }
+                }
+            }
+        }
+        Ok(plan)
+    }
+
+    /// The dataset directory of `setting`.
+    pub fn data_dir(&self, setting: &Corruptions) -> PathBuf {
+        self.data.join(setting_file_stem(setting))
+    }
+}
+
+/// `rotest status`: a line per setting (runs finished here, archived, unfinished, not started),
+/// one for the whole grid, then every run still to train with its directory.
+pub fn status(args: &GridArgs) -> Result<String> {
+    let plan = args.plan()?;
+    let count = |runs: &[&PlannedRun], state: RunState| runs.iter().filter(|r| r.state == state).count();
+    let line = |runs: &[&PlannedRun]| {
+        format!(
+            "{} finished here, {} archived in {}, {} unfinished (cut short, or in training now), {} not started",
+            count(runs, RunState::Finished),
+            count(runs, RunState::Archived),
+            args.report.display(),
+            count(runs, RunState::Unfinished),
+            count(runs, RunState::New)
+        )
+    };
+    let mut s = String::new();
+    let mut i = 0;
+    while i < plan.len() {
+        let setting = &plan[i].setting;
+        let runs: Vec<&PlannedRun> = plan[i..].iter().take_while(|r| &r.setting == setting).collect();
+        s += &format!("{}: {}\n", setting.name(), line(&runs));
+        i += runs.len();
+    }
+    let all: Vec<&PlannedRun> = plan.iter().collect();
+    s += &format!("all {} runs: {}\n", plan.len(), line(&all));
+    for r in plan.iter().filter(|r| r.state.to_train()) {
+        let what = if r.state == RunState::Unfinished { "unfinished" } else { "not started" };
+        s += &format!("{what}: {}\n", r.dir.display());
+    }
+    Ok(s)
+}
+
+/// `rotest grid`: for each setting, its dataset (generated if `DATA/<setting>` has none), then every
+/// run still to train; then the report. Before each dataset and run it asks `stop()`: when true it
+/// returns [`STOPPED_EXIT`] (finished runs kept, no report); else 0. Results are printed to stdout.
+pub fn run(args: &GridArgs, stop: &dyn Fn() -> bool) -> Result<i32> {
+    let plan = args.plan()?;
+    let device = equiarm_nn::device::open(&args.opts.device)?;
+    let mut trained = 0usize;
+    let stopped = |next: &Path, trained: usize| {
+        println!(
+            "stopped before {}: {trained} runs trained by this command, the rest not started and the report not \
+             written; the same command continues",
+            next.display()
+        );
+        STOPPED_EXIT
+    };
+    let mut i = 0;
+    while i < plan.len() {
+        let setting = &plan[i].setting;
+        let end = i + plan[i..].iter().take_while(|r| &r.setting == setting).count();
+        let dir = args.data_dir(setting);
+        if stop() {
+            return Ok(stopped(&dir, trained));
+        }
+        if !dir.join(crate::dataset::FILE_NAME).is_file() {
+            let ds = generate(&PairConfig { size: 152, supersample: 2, corruptions: setting.clone() }, args.pairs, 0)?;
+            println!("{}", ds.write(&dir)?.display());
+        }
+        let ds = Dataset::read(&dir, None)?;
+        for r in plan[i..end].iter().filter(|r| r.state.to_train()) {
+            if stop() {
+                return Ok(stopped(&r.dir, trained));
+            }
+            let rec = crate::train::run(&ds, &r.cfg, &device, &r.dir, &mut |_| {})?;
+            trained += 1;
+            println!("{}", crate::cli::summary(&rec));
+        }
+        i = end;
+    }
+    for f in crate::report::write(&args.runs, &args.report, &crate::cli::bounds_of(&args.data)?)? {
+        println!("{}", f.display());
+    }
+    Ok(0)
+}
