@@ -287,6 +287,132 @@ pub fn claims(t: &Table, bounds: &BTreeMap<String, f64>) -> String {
     s
 }
 
+/// A variant's colour, the same in every figure: CNN red, CNN + trans blue, Equi green, others
+/// purple.
+fn color(variant: &str) -> RGBColor {
+    match variant {
+        CNN => RGBColor(200, 60, 40),
+        CNN_TRANS => RGBColor(40, 90, 200),
+        EQUI => RGBColor(40, 150, 70),
+        _ => RGBColor(140, 80, 160),
+    }
+}
+
+/// How a panel is drawn: a figure of its own, or one of many in the overview.
+#[derive(Clone, Copy)]
+struct PanelStyle {
+    caption: u32,
+    labels: u32,
+    axis_names: bool,
+    legend: bool,
+}
+
+/// One setting's chart on `area`: accuracy (%) against training pairs (log scale) for each variant,
+/// error bars of one s.e.; `bound` (if below 1) as a dashed line.
+fn panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    caption: &str,
+    by_var: &BTreeMap<String, BTreeMap<usize, Vec<f64>>>,
+    bound: Option<f64>,
+    style: PanelStyle,
+) -> std::result::Result<(), String> {
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    // The sizes that were run, sorted and once each: the axis's ticks (the log scale's own ticks
+    // crowd into each other once N spans more than a decade).
+    let ns: Vec<usize> = by_var
+        .values()
+        .flat_map(|m| m.keys().copied())
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let (lo, hi) = (ns.first().copied().unwrap_or(1) as f64, ns.last().copied().unwrap_or(1) as f64);
+    // Logarithmic N axis with a margin of 20 % on both sides (N = 100, 400, 1600 evenly spaced).
+    let (x0, x1) = (lo.max(1.0) / 1.25, hi.max(1.0) * 1.25);
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", style.caption))
+        .margin(if style.axis_names { 12 } else { 6 })
+        .x_label_area_size(if style.axis_names { 40 } else { 22 })
+        .y_label_area_size(if style.axis_names { 50 } else { 32 })
+        .build_cartesian_2d((x0..x1).log_scale().with_key_points(ns.iter().map(|&n| n as f64).collect()), 0f64..100f64)
+        .map_err(e)?;
+    let mut mesh = chart.configure_mesh();
+    mesh.light_line_style(WHITE)
+        .label_style(("sans-serif", style.labels))
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y:.0}"));
+    if style.axis_names {
+        mesh.x_desc("training pairs N (log scale)").y_desc("test accuracy (%)");
+    }
+    mesh.draw().map_err(e)?;
+    for (v, by_n) in by_var {
+        let c = color(v);
+        let pts: Vec<(f64, f64, f64)> = by_n
+            .iter()
+            .map(|(n, a)| {
+                let (m, se) = mean_se(a);
+                (*n as f64, 100.0 * m, 100.0 * se)
+            })
+            .collect();
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                pts.iter().map(|p| (p.0, p.1)).collect::<Vec<_>>(),
+                c.stroke_width(2),
+            )))
+            .map_err(e)?
+            .label(v.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+        // error bars of one s.e. and a dot at each mean
+        chart
+            .draw_series(pts.iter().map(|p| PathElement::new(vec![(p.0, p.1 - p.2), (p.0, p.1 + p.2)], c)))
+            .map_err(e)?;
+        chart.draw_series(pts.iter().map(|p| Circle::new((p.0, p.1), 3, c.filled()))).map_err(e)?;
+    }
+    if let Some(b) = bound.filter(|b| *b < 1.0) {
+        let y = 100.0 * b;
+        // dashed: 40 dashes, evenly spaced on the log axis
+        let at = |t: f64| x0 * (x1 / x0).powf(t / 80.0);
+        chart
+            .draw_series(
+                (0..40).map(|k| PathElement::new(vec![(at(2.0 * k as f64), y), (at(2.0 * k as f64 + 1.0), y)], BLACK)),
+            )
+            .map_err(e)?;
+        chart
+            .draw_series(std::iter::once(PathElement::new(vec![(x0, y), (x0, y)], BLACK)))
+            .map_err(e)?
+            .label(format!("invariant bound {y:.1} %"))
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+    }
+    if style.legend {
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", style.labels))
+            .draw()
+            .map_err(e)?;
+    }
+    Ok(())
+}
+
+/// Draws a `w × h` RGB image with `draw` and saves it as PNG at `path`.
+fn png(
+    path: &Path,
+    (w, h): (u32, u32),
+    draw: impl FnOnce(&DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>) -> std::result::Result<(), String>,
+) -> Result<()> {
+    let err = |m: String| RotestError::Image { path: path.to_path_buf(), message: m };
+    ensure_font().map_err(|e| err(e.to_string()))?;
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        draw(&root).map_err(err)?;
+        root.present().map_err(|e| err(e.to_string()))?;
+    }
+    let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| err("buffer size".into()))?;
+    img.save(path).map_err(|e| err(e.to_string()))
+}
+
 /// One PNG: accuracy (%) against training pairs (log scale) for each variant of `setting`, error bars of one
 /// s.e.; `bound` (if below 1) as a dashed line.
 pub fn figure(
@@ -295,96 +421,31 @@ pub fn figure(
     by_var: &BTreeMap<String, BTreeMap<usize, Vec<f64>>>,
     bound: Option<f64>,
 ) -> Result<()> {
-    let err = |m: String| RotestError::Image { path: path.to_path_buf(), message: m };
-    ensure_font().map_err(|e| err(e.to_string()))?;
-    let (w, h) = (640u32, 420u32);
-    let mut buf = vec![255u8; (w * h * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        // The sizes that were run, sorted and once each: the axis's ticks (the log scale's own ticks
-        // crowd into each other once N spans more than a decade).
-        let ns: Vec<usize> = by_var
-            .values()
-            .flat_map(|m| m.keys().copied())
-            .collect::<std::collections::BTreeSet<_>>()
-            .into_iter()
-            .collect();
-        let (lo, hi) = (ns.first().copied().unwrap_or(1) as f64, ns.last().copied().unwrap_or(1) as f64);
-        // Logarithmic N axis with a margin of 20 % on both sides (N = 100, 400, 1600 evenly spaced).
-        let (x0, x1) = (lo.max(1.0) / 1.25, hi.max(1.0) * 1.25);
-        let mut chart = ChartBuilder::on(&root)
-            .caption(format!("rotation estimation: {setting}"), ("sans-serif", 20))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(50)
-            .build_cartesian_2d(
-                (x0..x1).log_scale().with_key_points(ns.iter().map(|&n| n as f64).collect()),
-                0f64..100f64,
-            )
-            .map_err(|e| err(e.to_string()))?;
-        chart
-            .configure_mesh()
-            .light_line_style(WHITE)
-            .x_label_formatter(&|x| format!("{x:.0}"))
-            .y_label_formatter(&|y| format!("{y:.0}"))
-            .x_desc("training pairs N (log scale)")
-            .y_desc("test accuracy (%)")
-            .draw()
-            .map_err(|e| err(e.to_string()))?;
-        let colors = [RGBColor(200, 60, 40), RGBColor(40, 90, 200), RGBColor(40, 150, 70), RGBColor(140, 80, 160)];
-        for (k, (v, by_n)) in by_var.iter().enumerate() {
-            let c = colors[k % colors.len()];
-            let pts: Vec<(f64, f64, f64)> = by_n
-                .iter()
-                .map(|(n, a)| {
-                    let (m, se) = mean_se(a);
-                    (*n as f64, 100.0 * m, 100.0 * se)
-                })
-                .collect();
-            chart
-                .draw_series(std::iter::once(PathElement::new(
-                    pts.iter().map(|p| (p.0, p.1)).collect::<Vec<_>>(),
-                    c.stroke_width(2),
-                )))
-                .map_err(|e| err(e.to_string()))?
-                .label(v.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-            // error bars of one s.e. and a dot at each mean
-            chart
-                .draw_series(pts.iter().map(|p| PathElement::new(vec![(p.0, p.1 - p.2), (p.0, p.1 + p.2)], c)))
-                .map_err(|e| err(e.to_string()))?;
-            chart
-                .draw_series(pts.iter().map(|p| Circle::new((p.0, p.1), 3, c.filled())))
-                .map_err(|e| err(e.to_string()))?;
+    let style = PanelStyle { caption: 20, labels: 14, axis_names: true, legend: true };
+    png(path, (640, 420), |root| panel(root, &format!("rotation estimation: {setting}"), by_var, bound, style))
+}
+
+/// One PNG with a small panel per setting of `t` (five to a row, in the table's order), the legend
+/// in the first: the whole experiment at a glance. Axes as in [`figure`]: training pairs N (log
+/// scale) across, test accuracy (%) up.
+pub fn overview(path: &Path, t: &Table, bounds: &BTreeMap<String, f64>) -> Result<()> {
+    let cols = 5usize;
+    let rows = t.len().div_ceil(cols).max(1);
+    let (pw, ph) = (330u32, 250u32);
+    png(path, (pw * cols as u32, 40 + ph * rows as u32), |root| {
+        let (top, rest) = root.split_vertically(40);
+        top.titled(
+            "rotation estimation: test accuracy (%) against training pairs N (log scale), mean ± s.e. over seeds",
+            ("sans-serif", 18),
+        )
+        .map_err(|e| e.to_string())?;
+        let areas = rest.split_evenly((rows, cols));
+        for (k, ((setting, by_var), area)) in t.iter().zip(&areas).enumerate() {
+            let style = PanelStyle { caption: 15, labels: 11, axis_names: false, legend: k == 0 };
+            panel(area, setting, by_var, bounds.get(setting).copied(), style)?;
         }
-        if let Some(b) = bound.filter(|b| *b < 1.0) {
-            let y = 100.0 * b;
-            // dashed: 40 dashes, evenly spaced on the log axis
-            let at = |t: f64| x0 * (x1 / x0).powf(t / 80.0);
-            chart
-                .draw_series(
-                    (0..40)
-                        .map(|k| PathElement::new(vec![(at(2.0 * k as f64), y), (at(2.0 * k as f64 + 1.0), y)], BLACK)),
-                )
-                .map_err(|e| err(e.to_string()))?;
-            chart
-                .draw_series(std::iter::once(PathElement::new(vec![(x0, y), (x0, y)], BLACK)))
-                .map_err(|e| err(e.to_string()))?
-                .label(format!("invariant bound {y:.1} %"))
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
-        }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 14))
-            .draw()
-            .map_err(|e| err(e.to_string()))?;
-        root.present().map_err(|e| err(e.to_string()))?;
-    }
-    let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| err("buffer size".into()))?;
-    img.save(path).map_err(|e| err(e.to_string()))
+        Ok(())
+    })
 }
 
 /// The archive a report writes beside its table: every run's record without its epoch history
@@ -448,7 +509,9 @@ pub fn write(runs_dir: &Path, out: &Path, bounds: &BTreeMap<String, f64>) -> Res
     let json = serde_json::to_vec_pretty(&kept)
         .map_err(|e| RotestError::Format { path: archive.clone(), message: e.to_string() })?;
     std::fs::write(&archive, json).map_err(io(&archive))?;
-    let mut files = vec![md, archive];
+    let all = out.join("rotest_overview.png");
+    overview(&all, &t, bounds)?;
+    let mut files = vec![md, archive, all];
     for (setting, by_var) in &t {
         let p = out.join(format!("rotest_{}.png", setting.replace(',', "+")));
         figure(&p, setting, by_var, bounds.get(setting).copied())?;
@@ -499,7 +562,7 @@ mod tests {
         let out = root.join("out");
         let bounds = BTreeMap::from([("condition_reverse".to_string(), 0.625)]);
         let files = write(&root.join("runs"), &out, &bounds).unwrap();
-        assert_eq!(files.len(), 3);
+        assert_eq!(files.len(), 4);
         let md = std::fs::read_to_string(out.join("rotest.md")).unwrap();
         assert!(md.contains("| condition_reverse | 100 | 70.0 (1) | – | 55.0 ± 5.0 (2) |"), "{md}");
         assert!(md.contains("| condition_reverse | 400 | – | 80.0 (1) | – |"), "{md}");
@@ -509,6 +572,9 @@ mod tests {
             "{md}"
         );
         assert!(image::open(out.join("rotest_condition_reverse.png")).is_ok());
+        // the overview: one row of five panels under the title
+        let all = image::open(out.join("rotest_overview.png")).unwrap();
+        assert_eq!((all.width(), all.height()), (5 * 330, 40 + 250));
         // the archive alone (no run directories) gives the same table
         let archived = read_archive(&out.join(ARCHIVE_FILE)).unwrap();
         assert_eq!(archived.len(), 4);
