@@ -74,7 +74,7 @@ enum Command {
     /// invariant bound, the report.
     #[command(
         subcommand,
-        after_help = "Examples:\n  equiarm rotest data --corrupt grid,side --pairs 2000 --seed 0 -o data/rotest/side+grid\n  equiarm rotest snapshots -o docs/rotest\n  equiarm rotest bound data/rotest/condition_reverse\n  equiarm rotest train --data data/rotest/none --model equi --train-pairs 400 --seed 0 -o runs/rotest/none/equi/400/s0\n  equiarm rotest grid --data data/rotest --runs runs/rotest --sizes 100,400\n  equiarm rotest invariance --data data/rotest/none runs/rotest/none/equi/400/s0\n  equiarm rotest report runs/rotest --data data/rotest"
+        after_help = "Examples:\n  equiarm rotest data --corrupt grid,side --pairs 2000 --seed 0 -o data/rotest/side+grid\n  equiarm rotest snapshots -o docs/rotest\n  equiarm rotest bound data/rotest/condition_reverse\n  equiarm rotest train --data data/rotest/none --model equi --train-pairs 400 --seed 0 -o runs/rotest/none/equi/400/s0\n  equiarm rotest grid --data data/rotest --runs runs/rotest --sizes 100,400\n  equiarm rotest status --data data/rotest --runs runs/rotest --sizes 100,400\n  equiarm rotest invariance --data data/rotest/none runs/rotest/none/equi/400/s0\n  equiarm rotest report runs/rotest --data data/rotest"
     )]
     Rotest(equiarm_rotest::cli::RotestCommand),
     /// The paper's RL experiments as named grids of in-process runs (experiments/NAME.toml,
