@@ -83,13 +83,17 @@ pub struct PlannedRun {
 }
 
 impl GridArgs {
-    /// The settings named, checked.
+    /// The settings named, checked, each once (in the order first named).
     pub fn settings(&self) -> Result<Vec<Corruptions>> {
-        let list: Vec<Corruptions> = if self.settings.trim() == "all" {
-            PAPER_SETTINGS.iter().map(|s| Corruptions::parse(s)).collect::<std::result::Result<_, _>>()?
-        } else {
-            self.settings.split(';').map(Corruptions::parse).collect::<std::result::Result<_, _>>()?
-        };
+        let named: Vec<&str> =
+            if self.settings.trim() == "all" { PAPER_SETTINGS.to_vec() } else { self.settings.split(';').collect() };
+        let mut list: Vec<Corruptions> = Vec::new();
+        for s in named {
+            let c = Corruptions::parse(s)?;
+            if !list.contains(&c) {
+                list.push(c);
+            }
+        }
         Ok(list)
     }
 
@@ -209,6 +213,10 @@ pub fn run(args: &GridArgs, stop: &dyn Fn() -> bool) -> Result<i32> {
         for r in plan[i..end].iter().filter(|r| r.state.to_train()) {
             if stop() {
                 return Ok(stopped(&r.dir, trained));
+            }
+            // finished meanwhile by another grid on the same runs directory
+            if r.dir.join("run.json").is_file() {
+                continue;
             }
             let rec = crate::train::run(&ds, &r.cfg, &device, &r.dir, &mut |_| {})?;
             trained += 1;

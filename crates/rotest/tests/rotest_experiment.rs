@@ -316,6 +316,9 @@ fn a_stopped_grid_keeps_its_finished_runs_and_the_same_command_continues() {
     assert!(text.contains("all 3 runs: 1 finished here, 0 archived in "), "{text}");
     assert!(text.contains(&format!("unfinished: {}\n", seed_dir(1).display())), "{text}");
     assert!(text.contains(&format!("not started: {}\n", seed_dir(2).display())), "{text}");
+    // a setting named twice is one setting
+    let twice = equiarm_rotest::grid::GridArgs { settings: "none;none".into(), ..args.clone() };
+    assert_eq!(twice.plan().unwrap().len(), 3);
     let written = std::fs::metadata(seed_dir(0).join("run.json")).unwrap().modified().unwrap();
     assert_eq!(run(grid(), &|| false).unwrap(), 0);
     assert!(seed_dir(1).join("run.json").is_file() && seed_dir(2).join("run.json").is_file());
