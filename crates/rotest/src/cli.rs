@@ -291,9 +291,9 @@ impl RotestCommand {
 }
 
 /// Runs one subcommand, printing its results to stdout and progress to stderr. Returns the exit
-/// status: 0, or [`STOPPED_EXIT`](equiarm_train::STOPPED_EXIT) when `rotest grid` saw `stop()` before its last run (it finishes
-/// the run in training first, keeps every finished run and writes no report; the same command
-/// continues).
+/// status: 0, or [`STOPPED_EXIT`](equiarm_train::STOPPED_EXIT) when `rotest grid` saw `stop()`
+/// before its last run (it finishes the run in training first, keeps every finished run and writes
+/// no report; the same command continues).
 pub fn run(cmd: RotestCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
     match cmd {
         RotestCommand::Data { corrupt, pairs, seed, size, supersample, out } => {
