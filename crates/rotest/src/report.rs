@@ -287,14 +287,15 @@ pub fn claims(t: &Table, bounds: &BTreeMap<String, f64>) -> String {
     s
 }
 
-/// A variant's colour, the same in every figure: CNN red, CNN + trans blue, Equi green, others
-/// purple.
+/// A variant's colour, the same in every figure: CNN red, CNN + trans blue, Equi green; others
+/// (`(no crop)`, `Equi + trans`) purple, orange or grey by their name.
 fn color(variant: &str) -> RGBColor {
+    const OTHERS: [RGBColor; 3] = [RGBColor(140, 80, 160), RGBColor(230, 140, 20), RGBColor(110, 110, 110)];
     match variant {
         CNN => RGBColor(200, 60, 40),
         CNN_TRANS => RGBColor(40, 90, 200),
         EQUI => RGBColor(40, 150, 70),
-        _ => RGBColor(140, 80, 160),
+        _ => OTHERS[variant.bytes().map(usize::from).sum::<usize>() % OTHERS.len()],
     }
 }
 
