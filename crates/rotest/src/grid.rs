@@ -72,8 +72,6 @@ impl RunState {
 pub struct PlannedRun {
     /// Its setting.
     pub setting: Corruptions,
-    /// Its variant.
-    pub variant: Variant,
     /// `RUNS/<setting>/<variant>/<N>/s<seed>`.
     pub dir: PathBuf,
     /// What it trains.
@@ -136,7 +134,7 @@ impl GridArgs {
                         } else {
                             RunState::New
                         };
-                        plan.push(PlannedRun { setting: c.clone(), variant, dir, cfg, state });
+                        plan.push(PlannedRun { setting: c.clone(), dir, cfg, state });
                     }
                 }
             }
@@ -166,12 +164,9 @@ pub fn status(args: &GridArgs) -> Result<String> {
         )
     };
     let mut s = String::new();
-    let mut i = 0;
-    while i < plan.len() {
-        let setting = &plan[i].setting;
-        let runs: Vec<&PlannedRun> = plan[i..].iter().take_while(|r| &r.setting == setting).collect();
-        s += &format!("{}: {}\n", setting.name(), line(&runs));
-        i += runs.len();
+    for group in plan.chunk_by(|a, b| a.setting == b.setting) {
+        let runs: Vec<&PlannedRun> = group.iter().collect();
+        s += &format!("{}: {}\n", group[0].setting.name(), line(&runs));
     }
     let all: Vec<&PlannedRun> = plan.iter().collect();
     s += &format!("all {} runs: {}\n", plan.len(), line(&all));
@@ -197,10 +192,8 @@ pub fn run(args: &GridArgs, stop: &dyn Fn() -> bool) -> Result<i32> {
         );
         STOPPED_EXIT
     };
-    let mut i = 0;
-    while i < plan.len() {
-        let setting = &plan[i].setting;
-        let end = i + plan[i..].iter().take_while(|r| &r.setting == setting).count();
+    for group in plan.chunk_by(|a, b| a.setting == b.setting) {
+        let setting = &group[0].setting;
         let dir = args.data_dir(setting);
         if stop() {
             return Ok(stopped(&dir, trained));
@@ -209,8 +202,11 @@ pub fn run(args: &GridArgs, stop: &dyn Fn() -> bool) -> Result<i32> {
             let ds = generate(&PairConfig { size: 152, supersample: 2, corruptions: setting.clone() }, args.pairs, 0)?;
             println!("{}", ds.write(&dir)?.display());
         }
-        let ds = Dataset::read(&dir, None)?;
-        for r in plan[i..end].iter().filter(|r| r.state.to_train()) {
+        let left: Vec<&PlannedRun> = group.iter().filter(|r| r.state.to_train()).collect();
+        // the dataset is read only for a setting with runs left (it is generated regardless: the
+        // report's bound line comes from it)
+        let ds = if left.is_empty() { continue } else { Dataset::read(&dir, None)? };
+        for r in left {
             if stop() {
                 return Ok(stopped(&r.dir, trained));
             }
@@ -222,7 +218,6 @@ pub fn run(args: &GridArgs, stop: &dyn Fn() -> bool) -> Result<i32> {
             trained += 1;
             println!("{}", crate::cli::summary(&rec));
         }
-        i = end;
     }
     for f in crate::report::write(&args.runs, &args.report, &crate::cli::bounds_of(&args.data)?)? {
         println!("{}", f.display());
