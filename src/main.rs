@@ -324,9 +324,10 @@ fn main() -> std::process::ExitCode {
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Rotest(c) => {
-            // Only the grid stops between runs on a signal; the other subcommands keep the default
-            // action (end at once).
-            let stop = c.is_grid().then(|| equiarm_nodes::signals::stop_flag(equiarm_rotest::cli::GRID_STOP));
+            // Only `train` and `grid` stop with a checkpoint on a signal; the other subcommands keep
+            // the default action (end at once).
+            let stop =
+                c.stops_with_checkpoint().then(|| equiarm_nodes::signals::stop_flag(equiarm_rotest::cli::TRAIN_STOP));
             let code = equiarm_rotest::cli::run(c, &|| stop.as_ref().is_some_and(|s| s.load(Ordering::Relaxed)))?;
             if code != 0 {
                 std::process::exit(code);

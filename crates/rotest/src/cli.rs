@@ -13,7 +13,7 @@ use crate::dataset::Dataset;
 use crate::error::Result;
 use crate::generate::{generate, setting_file_stem, write_snapshot};
 use crate::grid::GridArgs;
-use crate::train::{ModelKind, TrainConfig};
+use crate::train::{Checkpointing, ModelKind, Outcome, TrainConfig};
 
 /// `equiarm rotest …`.
 #[derive(Debug, clap::Subcommand)]
@@ -64,7 +64,10 @@ pub enum RotestCommand {
         /// Dataset directory (or its pairs.rotest file).
         data: PathBuf,
     },
-    /// Train and evaluate one network on one dataset: OUT/run.json and OUT/best.safetensors.
+    /// Train and evaluate one network on one dataset: OUT/run.json and OUT/best.safetensors. It
+    /// writes a checkpoint to OUT/resume/ every --checkpoint-minutes and continues from one found
+    /// there (of the same configuration). Ctrl-C (or SIGTERM) stops it at the end of the epoch with
+    /// a checkpoint, exit status 3; a second one at once.
     #[command(
         after_help = "Examples:\n  equiarm rotest train --data data/rotest/none --model equi --train-pairs 400 --seed 0 -o runs/none/equi/400/s0\n  equiarm rotest train --data data/rotest/none --model cnn --train-pairs 400 --img-trans 400 -o runs/none/cnn+trans/400/s0\n  equiarm rotest train --paper --device vulkan --data data/rotest/none --model equi --train-pairs 1600 -o runs/paper/none/equi/1600/s0"
     )]
@@ -96,9 +99,11 @@ pub enum RotestCommand {
     /// for each N and seed whose
     /// `RUNS/<setting>/<variant>/<N>/s<seed>/run.json` does not exist yet and that the report's
     /// archive (`REPORT/rotest_runs.json`) does not hold (so an interrupted grid continues where it
-    /// stopped, on this machine or from a committed report), then write the report. Ctrl-C (or
-    /// SIGTERM) stops it after the run in training, without the report, with exit status 3; a
-    /// second one at once, and that run starts again next time.
+    /// stopped, on this machine or from a committed report), then write the report. A run cut short
+    /// continues from its checkpoint (written every --checkpoint-minutes); a run another process is
+    /// training is skipped. Ctrl-C (or SIGTERM) stops it at the end of the epoch in training, with
+    /// a checkpoint and without the report, exit status 3; a second one at once (that run then
+    /// continues from its last checkpoint).
     #[command(
         after_help = "Example (a short schedule for 2 cores):\n  equiarm rotest grid --data data/rotest --runs runs/rotest --sizes 100,400 --seeds 0,1,2,3 --lr 1e-3 --min-epochs 20 --patience 20 --max-epochs 100"
     )]
@@ -212,9 +217,25 @@ pub struct TrainOpts {
     /// AMX: operands rounded to bfloat16, f32 sums). Recorded in each run's config.
     #[arg(long, default_value = "f32")]
     pub matmul: MatmulPrecision,
+    /// Minutes between a run's checkpoints (RUN/resume/, written at the end of an epoch; not part
+    /// of the run's config).
+    #[arg(long, default_value_t = 5.0)]
+    pub checkpoint_minutes: f64,
 }
 
 impl TrainOpts {
+    /// The time between checkpoints, checked.
+    pub fn checkpoint_every(&self) -> Result<std::time::Duration> {
+        let m = self.checkpoint_minutes;
+        if !(m.is_finite() && m > 0.0 && m <= 1e6) {
+            return Err(crate::RotestError::Config {
+                field: "--checkpoint-minutes",
+                message: format!("{m} must be a number of minutes in (0, 1e6]"),
+            });
+        }
+        Ok(std::time::Duration::from_secs_f64(m * 60.0))
+    }
+
     /// The configuration of one run with these options.
     pub fn config(&self, model: ModelKind, train_pairs: usize, img_trans: usize, seed: u64) -> Result<TrainConfig> {
         let mut cfg = TrainConfig::paper(model, train_pairs, seed);
@@ -278,22 +299,22 @@ pub(crate) fn bounds_of(root: &std::path::Path) -> Result<BTreeMap<String, f64>>
     Ok(bounds)
 }
 
-/// What `rotest grid` does on its first SIGINT or SIGTERM: `stop` turns true, and the grid ends
-/// once the run in training is finished.
-pub const GRID_STOP: &str = "stopping after the run in training (again to exit now and lose that run)";
+/// What `rotest train` and `grid` do on their first SIGINT or SIGTERM: `stop` turns true, and the
+/// run in training writes a checkpoint at the end of its epoch and ends.
+pub const TRAIN_STOP: &str = "stopping at the end of the epoch with a checkpoint (again to exit now: the run continues from its last checkpoint)";
 
 impl RotestCommand {
-    /// Whether this is `rotest grid`, the one subcommand that stops between runs when asked
-    /// ([`run`]'s `stop`); the others end at once on a signal, losing nothing finished.
-    pub fn is_grid(&self) -> bool {
-        matches!(self, RotestCommand::Grid { .. })
+    /// Whether this is `rotest train` or `grid`, the subcommands that stop with a checkpoint when
+    /// asked ([`run`]'s `stop`); the others end at once on a signal, losing nothing finished.
+    pub fn stops_with_checkpoint(&self) -> bool {
+        matches!(self, RotestCommand::Train { .. } | RotestCommand::Grid { .. })
     }
 }
 
 /// Runs one subcommand, printing its results to stdout and progress to stderr. Returns the exit
-/// status: 0, or [`STOPPED_EXIT`](equiarm_train::STOPPED_EXIT) when `rotest grid` saw `stop()`
-/// before its last run (it finishes the run in training first, keeps every finished run and writes
-/// no report; the same command continues).
+/// status: 0, or [`STOPPED_EXIT`](equiarm_train::STOPPED_EXIT) when `rotest train` or `grid` saw
+/// `stop()` before the end (the run in training writes a checkpoint; the grid keeps every finished
+/// run and writes no report; the same command continues).
 pub fn run(cmd: RotestCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
     match cmd {
         RotestCommand::Data { corrupt, pairs, seed, size, supersample, out } => {
@@ -331,12 +352,24 @@ pub fn run(cmd: RotestCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
         }
         RotestCommand::Train { data, model, train_pairs, img_trans, seed, opts, out } => {
             let cfg = opts.config(model, train_pairs, img_trans, seed)?;
+            let ckpt = Checkpointing { every: opts.checkpoint_every()?, stop };
             let device = equiarm_nn::device::open(&opts.device)?;
             let t0 = Instant::now();
             let ds = Dataset::read(&data, None)?;
             eprintln!("{} pairs of {} px read in {:.2} s", ds.len(), ds.header.size, t0.elapsed().as_secs_f64());
-            let r = crate::train::run(&ds, &cfg, &device, &out, &mut print_epoch)?;
-            println!("{}", summary(&r));
+            if let Some(dir) = crate::resume::find(&out) {
+                eprintln!("continuing from the checkpoint in {}", dir.display());
+            }
+            match crate::train::run_with(&ds, &cfg, &device, &out, Some(&ckpt), &mut print_epoch)? {
+                Outcome::Finished(r) => println!("{}", summary(&r)),
+                Outcome::Stopped { epoch } => {
+                    println!(
+                        "stopped after epoch {epoch}, with a checkpoint in {}: the same command continues",
+                        out.join(crate::resume::RESUME_DIR).display()
+                    );
+                    return Ok(equiarm_train::STOPPED_EXIT);
+                }
+            }
         }
         RotestCommand::Grid(args) => return crate::grid::run(&args, stop),
         RotestCommand::Status(args) => print!("{}", crate::grid::status(&args)?),

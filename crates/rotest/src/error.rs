@@ -30,6 +30,14 @@ pub enum RotestError {
         /// The rejected value and the domain it must lie in.
         message: String,
     },
+    /// Another process is training in this run directory (it holds `RUN/.lock`).
+    #[error(
+        "{path}: another process is training in this run directory; wait for it to end or choose another directory"
+    )]
+    Busy {
+        /// The run directory.
+        path: PathBuf,
+    },
     /// The simulator failed (a camera or scene setting).
     #[error(transparent)]
     Sim(#[from] equiarm_sim::SimError),

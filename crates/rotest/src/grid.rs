@@ -12,7 +12,7 @@ use crate::cli::{TrainOpts, Variant};
 use crate::dataset::Dataset;
 use crate::error::{Result, RotestError};
 use crate::generate::{generate, setting_file_stem};
-use crate::train::TrainConfig;
+use crate::train::{Checkpointing, Outcome, TrainConfig};
 
 /// What names a grid: where its datasets, runs and report are, and which runs it holds.
 #[derive(Clone, Debug, clap::Args)]
@@ -53,8 +53,8 @@ pub enum RunState {
     Finished,
     /// The report's archive holds it, with the same configuration.
     Archived,
-    /// Its directory exists without a `run.json`: cut short (it trains again from the start), or
-    /// in training now.
+    /// Its directory exists without a `run.json`: stopped or cut short (it continues from its
+    /// checkpoint, if it wrote one), or in training now.
     Unfinished,
     /// Not started.
     New,
@@ -171,18 +171,28 @@ pub fn status(args: &GridArgs) -> Result<String> {
     let all: Vec<&PlannedRun> = plan.iter().collect();
     s += &format!("all {} runs: {}\n", plan.len(), line(&all));
     for r in plan.iter().filter(|r| r.state.to_train()) {
-        let what = if r.state == RunState::Unfinished { "unfinished" } else { "not started" };
+        let what = match (r.state, crate::resume::find(&r.dir)) {
+            (RunState::New, _) => "not started".to_string(),
+            (_, Some(dir)) => match crate::resume::read_state(&dir) {
+                Ok(state) => format!("unfinished, checkpoint after epoch {}", state.epoch),
+                Err(e) => format!("unfinished, unreadable checkpoint ({e})"),
+            },
+            (_, None) => "unfinished, no checkpoint".to_string(),
+        };
         s += &format!("{what}: {}\n", r.dir.display());
     }
     Ok(s)
 }
 
 /// `rotest grid`: for each setting, its dataset (generated if `DATA/<setting>` has none), then every
-/// run still to train; then the report. Before each dataset and run it asks `stop()`: when true it
-/// returns [`STOPPED_EXIT`] (finished runs kept, no report); else 0. Results are printed to stdout.
+/// run still to train (an unfinished one from its checkpoint; one another process is training is
+/// skipped); then the report. Before each dataset and run, and after each epoch, it asks `stop()`:
+/// when true it returns [`STOPPED_EXIT`] (finished runs kept, the run in training checkpointed, no
+/// report); else 0. Results are printed to stdout.
 pub fn run(args: &GridArgs, stop: &dyn Fn() -> bool) -> Result<i32> {
     let plan = args.plan()?;
     let device = equiarm_nn::device::open(&args.opts.device)?;
+    let ckpt = Checkpointing { every: args.opts.checkpoint_every()?, stop };
     let mut trained = 0usize;
     let stopped = |next: &Path, trained: usize| {
         println!(
@@ -214,9 +224,29 @@ pub fn run(args: &GridArgs, stop: &dyn Fn() -> bool) -> Result<i32> {
             if r.dir.join("run.json").is_file() {
                 continue;
             }
-            let rec = crate::train::run(&ds, &r.cfg, &device, &r.dir, &mut |_| {})?;
-            trained += 1;
-            println!("{}", crate::cli::summary(&rec));
+            if let Some(dir) = crate::resume::find(&r.dir) {
+                let epoch = crate::resume::read_state(&dir).map(|s| s.epoch).unwrap_or(0);
+                println!("{}: continuing from its checkpoint after epoch {epoch}", r.dir.display());
+            }
+            match crate::train::run_with(&ds, &r.cfg, &device, &r.dir, Some(&ckpt), &mut |_| {}) {
+                Ok(Outcome::Finished(rec)) => {
+                    trained += 1;
+                    println!("{}", crate::cli::summary(&rec));
+                }
+                Ok(Outcome::Stopped { epoch }) => {
+                    println!(
+                        "stopped in {} after epoch {epoch}, its checkpoint written: {trained} runs trained by this \
+                         command, the report not written; the same command continues",
+                        r.dir.display()
+                    );
+                    return Ok(STOPPED_EXIT);
+                }
+                // in training by another grid on the same runs directory
+                Err(RotestError::Busy { path }) => {
+                    println!("{}: in training by another process, skipped", path.display())
+                }
+                Err(e) => return Err(e),
+            }
         }
     }
     for f in crate::report::write(&args.runs, &args.report, &crate::cli::bounds_of(&args.data)?)? {

@@ -10,6 +10,7 @@
 //!   snapshot PNGs.
 //! - [`bound`]: the upper bound on the accuracy of an invariant classifier.
 //! - [`train`]: training and evaluation, the run file.
+//! - [`resume`]: a run's checkpoint, to continue it where it stopped.
 //! - [`grid`]: the experiment's grid of runs: where each stands, training those left.
 //! - [`report`]: the table and figures over many runs.
 //! - [`cli`]: the `equiarm rotest` subcommands.
@@ -21,6 +22,7 @@ pub mod error;
 pub mod generate;
 pub mod grid;
 pub mod report;
+pub mod resume;
 pub mod train;
 
 pub use error::{Result, RotestError};

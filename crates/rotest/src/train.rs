@@ -4,10 +4,10 @@
 //! accuracy, early stopping, random or centre crops, and the "+ image transformations" augmentation.
 
 use std::path::Path;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use equiarm_nn::burn::module::Module;
-use equiarm_nn::burn::optim::{AdamConfig, GradientsParams};
+use equiarm_nn::burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use equiarm_nn::burn::tensor::activation::log_softmax;
 use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
 use equiarm_nn::init::Init;
@@ -20,6 +20,7 @@ use rayon::prelude::*;
 
 use crate::dataset::Dataset;
 use crate::error::{Result, RotestError, io};
+use crate::resume;
 
 /// Input channels: RGBD of the first image, then of the second.
 pub const CHANNELS: usize = 8;
@@ -516,10 +517,140 @@ pub fn argmax_rows(logits: Tensor<2>) -> Vec<usize> {
         .collect()
 }
 
+/// How a run writes checkpoints and stops: options of the invocation, not of the run's config
+/// (a run resumes under other ones).
+#[derive(Clone, Copy)]
+pub struct Checkpointing<'a> {
+    /// Time between checkpoints (written at the end of the first epoch past it).
+    pub every: Duration,
+    /// Polled after each epoch: once true, the run writes a checkpoint and stops.
+    pub stop: &'a dyn Fn() -> bool,
+}
+
+fn never() -> bool {
+    false
+}
+
+impl Checkpointing<'static> {
+    /// A checkpoint every `minutes`; never stopped.
+    pub fn every_minutes(minutes: f64) -> Self {
+        Checkpointing { every: Duration::from_secs_f64(minutes.max(0.0) * 60.0), stop: &never }
+    }
+}
+
+/// How [`run_with`] ended.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Outcome {
+    /// The run finished: its record (also in `run.json`).
+    Finished(RunRecord),
+    /// Stopped when asked, after `epoch` epochs, with a checkpoint in `RUN/resume/`: the same call
+    /// continues it.
+    Stopped {
+        /// Epochs finished.
+        epoch: usize,
+    },
+}
+
+/// Where training stands: the network, the optimiser, the random stream, the epochs so far and the
+/// best validation epoch with its weights (on the plain device).
+struct Progress<M> {
+    model: M,
+    optim: ModuleOptimizer,
+    rng: ChaCha8Rng,
+    history: Vec<EpochRecord>,
+    best: Option<(f64, usize, M)>,
+}
+
+impl<M: Classifier> Progress<M> {
+    fn new(model: M, cfg: &TrainConfig) -> Self {
+        Progress {
+            model,
+            optim: AdamConfig::new().init(),
+            rng: ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x7261_696e),
+            history: Vec::new(),
+            best: None,
+        }
+    }
+
+    /// Writes the checkpoint of `run_dir`.
+    fn save(&self, run_dir: &Path, cfg: &TrainConfig) -> Result<()> {
+        let state = resume::ResumeState {
+            config: cfg.clone(),
+            epoch: self.history.len(),
+            rng: resume::rng_state(&self.rng),
+            history: self.history.clone(),
+            best: self.best.as_ref().map(|b| (b.0, b.1)),
+        };
+        resume::write(run_dir, &state, &self.optim, |files| {
+            equiarm_nn::checkpoint::save(&self.model, &files.model())?;
+            if let Some(b) = &self.best {
+                equiarm_nn::checkpoint::save(&b.2, &files.best())?;
+            }
+            Ok(())
+        })
+    }
+
+    /// The progress of `run_dir`'s checkpoint, or a fresh start when it has none. `build` makes the
+    /// network on a device (`device` is the plain one; training runs on its autodiff twin).
+    fn start(run_dir: &Path, cfg: &TrainConfig, device: &Device, build: &dyn Fn(&Device) -> Result<M>) -> Result<Self> {
+        let train_device = device.clone().autodiff();
+        let Some(dir) = resume::find(run_dir) else {
+            return Ok(Progress::new(resume::fixed_param_ids(build(&train_device)?), cfg));
+        };
+        let state = resume::read_state(&dir)?;
+        if state.config != *cfg {
+            return Err(RotestError::Format {
+                path: dir,
+                message: format!(
+                    "this checkpoint is of another configuration ({:?} N={} img-trans {} seed {}, lr {}, \
+                     epochs {}..{} patience {}, hidden {}, input {}): run with that configuration to \
+                     continue it, or delete the directory to start this one over",
+                    state.config.model,
+                    state.config.train_pairs,
+                    state.config.img_trans,
+                    state.config.seed,
+                    state.config.lr,
+                    state.config.min_epochs,
+                    state.config.max_epochs,
+                    state.config.patience,
+                    state.config.hidden,
+                    state.config.input
+                ),
+            });
+        }
+        if state.history.len() != state.epoch || state.epoch == 0 || state.best.is_none() {
+            return Err(RotestError::Format {
+                path: dir,
+                message: format!(
+                    "damaged checkpoint: {} epochs finished but {} in its history{}",
+                    state.epoch,
+                    state.history.len(),
+                    if state.best.is_none() { ", and no best epoch" } else { "" }
+                ),
+            });
+        }
+        let files = resume::Files::at(&dir);
+        let model = resume::fixed_param_ids(equiarm_nn::checkpoint::load(build(&train_device)?, &files.model())?);
+        let best = match state.best {
+            Some((val, epoch)) => Some((val, epoch, equiarm_nn::checkpoint::load(build(device)?, &files.best())?)),
+            None => None,
+        };
+        let optim = files.load_optim(AdamConfig::new().init())?;
+        let rng = resume::rng_from(&state.rng, &dir)?;
+        Ok(Progress { model, optim, rng, history: state.history, best })
+    }
+}
+
+/// How [`fit_from`] ended.
+enum Fitted<M> {
+    Done(M, Vec<EpochRecord>),
+    Stopped(usize),
+}
+
 /// Trains `model` (built on an autodiff device) on `train`, evaluating on `val` and `test` after each
 /// epoch; keeps the weights of the best validation epoch. `on_epoch` sees each epoch's record.
 pub fn fit<M: Classifier>(
-    mut model: M,
+    model: M,
     cfg: &TrainConfig,
     train: &Samples,
     val: &Samples,
@@ -527,16 +658,33 @@ pub fn fit<M: Classifier>(
     device: &Device,
     on_epoch: &mut dyn FnMut(&EpochRecord),
 ) -> (M, Vec<EpochRecord>) {
-    let mut optim = AdamConfig::new().init();
-    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x7261_696e);
-    let mut best: Option<(f64, usize, M)> = None;
-    let mut history = Vec::new();
+    match fit_from(Progress::new(model, cfg), cfg, train, val, test, device, None, on_epoch) {
+        Ok(Fitted::Done(m, h)) => (m, h),
+        // without checkpoints it neither stops nor writes anything
+        Ok(Fitted::Stopped(_)) | Err(_) => unreachable!("fit without checkpoints cannot stop or fail"),
+    }
+}
+
+/// [`fit`] from `p` (a fresh start or a checkpoint), writing checkpoints into the run directory
+/// with `ckpt` (none without).
+#[allow(clippy::too_many_arguments)]
+fn fit_from<M: Classifier>(
+    mut p: Progress<M>,
+    cfg: &TrainConfig,
+    train: &Samples,
+    val: &Samples,
+    test: &Samples,
+    device: &Device,
+    ckpt: Option<(&Path, &Checkpointing)>,
+    on_epoch: &mut dyn FnMut(&EpochRecord),
+) -> Result<Fitted<M>> {
     let span = train.side - cfg.input;
     let centre = span / 2;
-    for epoch in 1..=cfg.max_epochs {
+    let mut last_checkpoint = Instant::now();
+    for epoch in p.history.len() + 1..=cfg.max_epochs {
         let t0 = Instant::now();
         let mut order: Vec<usize> = (0..train.len()).collect();
-        order.shuffle(&mut rng);
+        order.shuffle(&mut p.rng);
         let (mut loss_sum, mut right) = (0.0f64, 0usize);
         for chunk in order.chunks(cfg.batch) {
             let offsets: Vec<(usize, usize)> = chunk
@@ -544,7 +692,7 @@ pub fn fit<M: Classifier>(
                 .map(|_| {
                     if cfg.crop {
                         use rand::Rng;
-                        (rng.random_range(0..=span), rng.random_range(0..=span))
+                        (p.rng.random_range(0..=span), p.rng.random_range(0..=span))
                     } else {
                         (centre, centre)
                     }
@@ -556,19 +704,19 @@ pub fn fit<M: Classifier>(
                 onehot[r * CLASSES + train.y[i] as usize] = 1.0;
             }
             let target = Tensor::<2>::from_data(TensorData::new(onehot, [chunk.len(), CLASSES]), device);
-            let logits = model.logits(x);
+            let logits = p.model.logits(x);
             let pred = argmax_rows(logits.clone().detach());
             right += chunk.iter().zip(&pred).filter(|(i, p)| train.y[**i] as usize == **p).count();
             let loss = (log_softmax(logits, 1) * target).sum_dim(1).mean().neg();
             loss_sum += loss.clone().into_data().try_to_vec::<f32>().map(|v| v[0] as f64).unwrap_or(f64::NAN)
                 * chunk.len() as f64;
-            let grads = GradientsParams::from_grads(loss.backward(), &model);
-            model = optim.step(cfg.lr, model, grads);
+            let grads = GradientsParams::from_grads(loss.backward(), &p.model);
+            p.model = p.optim.step(cfg.lr, p.model, grads);
         }
-        let eval = model.valid();
+        let eval = p.model.valid();
         let plain = device.clone().inner();
         let val_acc = accuracy(&eval, val, cfg.input, cfg.batch, &plain);
-        let improved = best.as_ref().is_none_or(|b| val_acc > b.0);
+        let improved = p.best.as_ref().is_none_or(|b| val_acc > b.0);
         let test_acc = improved.then(|| accuracy(&eval, test, cfg.input, cfg.batch, &plain));
         let rec = EpochRecord {
             epoch,
@@ -579,17 +727,29 @@ pub fn fit<M: Classifier>(
             seconds: t0.elapsed().as_secs_f64(),
         };
         on_epoch(&rec);
-        history.push(rec);
+        p.history.push(rec);
         if improved {
-            best = Some((val_acc, epoch, eval));
+            p.best = Some((val_acc, epoch, eval));
         }
-        let best_epoch = best.as_ref().map_or(epoch, |b| b.1);
+        let best_epoch = p.best.as_ref().map_or(epoch, |b| b.1);
         if epoch >= cfg.min_epochs && epoch - best_epoch >= cfg.patience {
             break;
         }
+        if let Some((run_dir, c)) = ckpt
+            && epoch < cfg.max_epochs
+        {
+            let stop = (c.stop)();
+            if stop || last_checkpoint.elapsed() >= c.every {
+                p.save(run_dir, cfg)?;
+                last_checkpoint = Instant::now();
+            }
+            if stop {
+                return Ok(Fitted::Stopped(epoch));
+            }
+        }
     }
-    let best_model = best.map(|b| b.2).unwrap_or_else(|| model.valid());
-    (best_model, history)
+    let best_model = p.best.map(|b| b.2).unwrap_or_else(|| p.model.valid());
+    Ok(Fitted::Done(best_model, p.history))
 }
 
 /// Builds the network of `cfg` on `device`.
@@ -600,7 +760,8 @@ fn net_config(cfg: &TrainConfig) -> NetConfig {
 /// The whole run on `device` (a plain device, e.g. from `equiarm_nn::device::open`; autodiff is
 /// added here): split `ds`, prepare the samples (with the image-transformation copies), build the
 /// network from `cfg.seed`, [`fit`], write `out/run.json` and the best weights
-/// `out/best.safetensors`. Returns the record.
+/// `out/best.safetensors`. Returns the record. Continues from the checkpoint in `out` if there is
+/// one, and writes none ([`run_with`] does).
 pub fn run(
     ds: &Dataset,
     cfg: &TrainConfig,
@@ -608,6 +769,24 @@ pub fn run(
     out: &Path,
     on_epoch: &mut dyn FnMut(&EpochRecord),
 ) -> Result<RunRecord> {
+    match run_with(ds, cfg, device, out, None, on_epoch)? {
+        Outcome::Finished(r) => Ok(r),
+        Outcome::Stopped { .. } => unreachable!("a run without checkpoints does not stop"),
+    }
+}
+
+/// [`run`] with checkpoints (`crate::resume`) as `ckpt` says: every `ckpt.every`, and when
+/// `ckpt.stop()` turns true, after which it returns [`Outcome::Stopped`]. A run that finishes
+/// removes its checkpoint. Only one process trains in `out` at a time: a second is refused
+/// ([`RotestError::Busy`]).
+pub fn run_with(
+    ds: &Dataset,
+    cfg: &TrainConfig,
+    device: &Device,
+    out: &Path,
+    ckpt: Option<&Checkpointing>,
+    on_epoch: &mut dyn FnMut(&EpochRecord),
+) -> Result<Outcome> {
     cfg.validate()?;
     equiarm_nn::kernels::set_matmul_precision(cfg.matmul)
         .map_err(|message| RotestError::Config { field: "--matmul", message })?;
@@ -617,22 +796,42 @@ pub fn run(
     train.append_rotated_copies(ds, &tr[..cfg.img_trans])?;
     let val = Samples::from_dataset(ds, &va, side)?;
     let test = Samples::from_dataset(ds, &te, side)?;
-    std::fs::create_dir_all(out).map_err(io(out))?;
-    let device = device.clone().autodiff();
+    let _claim = match equiarm_train::rundir::RunDirLock::try_acquire(out) {
+        Ok(Some(claim)) => claim,
+        Ok(None) => return Err(RotestError::Busy { path: out.to_path_buf() }),
+        Err(e) => return Err(RotestError::Format { path: out.to_path_buf(), message: e.to_string() }),
+    };
     let init = Init::new(cfg.seed);
     let ncfg = net_config(cfg);
     let weights = out.join("best.safetensors");
-    let history = match cfg.model {
+    let ckpt = ckpt.map(|c| (out, c));
+    let fitted = match cfg.model {
         ModelKind::Equi => {
-            let (m, h) = fit(RotEquiNet::new(&ncfg, &init, &device)?, cfg, &train, &val, &test, &device, on_epoch);
-            equiarm_nn::checkpoint::save(&m, &weights)?;
-            h
+            let build = |d: &Device| Ok(RotEquiNet::new(&ncfg, &init, d)?);
+            let start = Progress::start(out, cfg, device, &build)?;
+            match fit_from(start, cfg, &train, &val, &test, &device.clone().autodiff(), ckpt, on_epoch)? {
+                Fitted::Done(m, h) => {
+                    equiarm_nn::checkpoint::save(&m, &weights)?;
+                    Fitted::Done((), h)
+                }
+                Fitted::Stopped(e) => Fitted::Stopped(e),
+            }
         }
         ModelKind::Cnn => {
-            let (m, h) = fit(RotCnnNet::new(&ncfg, &init, &device)?, cfg, &train, &val, &test, &device, on_epoch);
-            equiarm_nn::checkpoint::save(&m, &weights)?;
-            h
+            let build = |d: &Device| Ok(RotCnnNet::new(&ncfg, &init, d)?);
+            let start = Progress::start(out, cfg, device, &build)?;
+            match fit_from(start, cfg, &train, &val, &test, &device.clone().autodiff(), ckpt, on_epoch)? {
+                Fitted::Done(m, h) => {
+                    equiarm_nn::checkpoint::save(&m, &weights)?;
+                    Fitted::Done((), h)
+                }
+                Fitted::Stopped(e) => Fitted::Stopped(e),
+            }
         }
+    };
+    let history = match fitted {
+        Fitted::Done((), h) => h,
+        Fitted::Stopped(epoch) => return Ok(Outcome::Stopped { epoch }),
     };
     let best = history
         .iter()
@@ -653,7 +852,8 @@ pub fn run(
     let json = serde_json::to_vec_pretty(&record)
         .map_err(|e| RotestError::Format { path: path.clone(), message: e.to_string() })?;
     std::fs::write(&path, json).map_err(io(&path))?;
-    Ok(record)
+    resume::remove(out)?;
+    Ok(Outcome::Finished(record))
 }
 
 #[cfg(test)]

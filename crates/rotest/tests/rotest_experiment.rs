@@ -247,6 +247,7 @@ fn grid_args(
         max_epochs: 1,
         device: "cpu".into(),
         matmul: Default::default(),
+        checkpoint_minutes: 5.0,
     };
     equiarm_rotest::grid::GridArgs {
         data: root.join("data"),
@@ -314,7 +315,7 @@ fn a_stopped_grid_keeps_its_finished_runs_and_the_same_command_continues() {
     assert!(text.contains("none: 1 finished here, 0 archived in "), "{text}");
     assert!(text.contains(", 1 unfinished (cut short, or in training now), 1 not started\n"), "{text}");
     assert!(text.contains("all 3 runs: 1 finished here, 0 archived in "), "{text}");
-    assert!(text.contains(&format!("unfinished: {}\n", seed_dir(1).display())), "{text}");
+    assert!(text.contains(&format!("unfinished, no checkpoint: {}\n", seed_dir(1).display())), "{text}");
     assert!(text.contains(&format!("not started: {}\n", seed_dir(2).display())), "{text}");
     // a setting named twice is one setting
     let twice = equiarm_rotest::grid::GridArgs { settings: "none;none".into(), ..args.clone() };

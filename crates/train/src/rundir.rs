@@ -52,6 +52,25 @@ pub struct RunDirLock {
 impl RunDirLock {
     /// Create `run_dir` if needed and claim it.
     pub fn acquire(run_dir: &Path) -> Result<Self, TrainError> {
+        match Self::try_acquire(run_dir)? {
+            Some(claim) => Ok(claim),
+            None => {
+                let owner = std::fs::read_to_string(run_dir.join(".lock")).unwrap_or_default();
+                let owner = owner.trim();
+                let who = if owner.is_empty() { String::new() } else { format!(" (pid {owner})") };
+                Err(TrainError::Io {
+                    path: run_dir.into(),
+                    message: format!(
+                        "the run directory is in use by another training process{who}: wait for it to end or choose another --run-dir"
+                    ),
+                })
+            }
+        }
+    }
+
+    /// [`RunDirLock::acquire`], but `None` when another process holds the claim (instead of an
+    /// error), for a caller that moves on to other work.
+    pub fn try_acquire(run_dir: &Path) -> Result<Option<Self>, TrainError> {
         let io = |path: &Path, message: String| TrainError::Io { path: path.into(), message };
         std::fs::create_dir_all(run_dir).map_err(|e| io(run_dir, e.to_string()))?;
         let path = run_dir.join(".lock");
@@ -64,17 +83,7 @@ impl RunDirLock {
             .map_err(|e| io(&path, e.to_string()))?;
         match file.try_lock() {
             Ok(()) => {}
-            Err(std::fs::TryLockError::WouldBlock) => {
-                let owner = std::fs::read_to_string(&path).unwrap_or_default();
-                let owner = owner.trim();
-                let who = if owner.is_empty() { String::new() } else { format!(" (pid {owner})") };
-                return Err(io(
-                    run_dir,
-                    format!(
-                        "the run directory is in use by another training process{who}: wait for it to end or choose another --run-dir"
-                    ),
-                ));
-            }
+            Err(std::fs::TryLockError::WouldBlock) => return Ok(None),
             // A filesystem without file locks (some network mounts): run unguarded, as before.
             Err(std::fs::TryLockError::Error(e)) if e.kind() == std::io::ErrorKind::Unsupported => {
                 log::warn!(
@@ -86,7 +95,7 @@ impl RunDirLock {
         }
         use std::io::Write;
         file.set_len(0).and_then(|_| writeln!(file, "{}", std::process::id())).map_err(|e| io(&path, e.to_string()))?;
-        Ok(RunDirLock { _file: file })
+        Ok(Some(RunDirLock { _file: file }))
     }
 
     /// Claim `run_dir` for a run that starts there: a new run ([`RunDirLock::acquire_new`]), or
