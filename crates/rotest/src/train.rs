@@ -752,6 +752,27 @@ fn fit_from<M: Classifier>(
     Ok(Fitted::Done(best_model, p.history))
 }
 
+/// Trains the network `build` makes on the train, validation and test `splits`, from the checkpoint
+/// in `out` if there is one, and saves its best weights to `out/best.safetensors` when it finishes.
+fn train_net<M: Classifier>(
+    build: &dyn Fn(&Device) -> Result<M>,
+    cfg: &TrainConfig,
+    [train, val, test]: [&Samples; 3],
+    device: &Device,
+    out: &Path,
+    ckpt: Option<&Checkpointing>,
+    on_epoch: &mut dyn FnMut(&EpochRecord),
+) -> Result<Fitted<()>> {
+    let start = Progress::start(out, cfg, device, build)?;
+    match fit_from(start, cfg, train, val, test, &device.clone().autodiff(), ckpt.map(|c| (out, c)), on_epoch)? {
+        Fitted::Done(m, history) => {
+            equiarm_nn::checkpoint::save(&m, &out.join("best.safetensors"))?;
+            Ok(Fitted::Done((), history))
+        }
+        Fitted::Stopped(epoch) => Ok(Fitted::Stopped(epoch)),
+    }
+}
+
 /// Builds the network of `cfg` on `device`.
 fn net_config(cfg: &TrainConfig) -> NetConfig {
     NetConfig { hidden: cfg.hidden, input_size: cfg.input, in_channels: CHANNELS }
@@ -803,30 +824,13 @@ pub fn run_with(
     };
     let init = Init::new(cfg.seed);
     let ncfg = net_config(cfg);
-    let weights = out.join("best.safetensors");
-    let ckpt = ckpt.map(|c| (out, c));
+    let splits = [&train, &val, &test];
     let fitted = match cfg.model {
         ModelKind::Equi => {
-            let build = |d: &Device| Ok(RotEquiNet::new(&ncfg, &init, d)?);
-            let start = Progress::start(out, cfg, device, &build)?;
-            match fit_from(start, cfg, &train, &val, &test, &device.clone().autodiff(), ckpt, on_epoch)? {
-                Fitted::Done(m, h) => {
-                    equiarm_nn::checkpoint::save(&m, &weights)?;
-                    Fitted::Done((), h)
-                }
-                Fitted::Stopped(e) => Fitted::Stopped(e),
-            }
+            train_net(&|d| Ok(RotEquiNet::new(&ncfg, &init, d)?), cfg, splits, device, out, ckpt, on_epoch)?
         }
         ModelKind::Cnn => {
-            let build = |d: &Device| Ok(RotCnnNet::new(&ncfg, &init, d)?);
-            let start = Progress::start(out, cfg, device, &build)?;
-            match fit_from(start, cfg, &train, &val, &test, &device.clone().autodiff(), ckpt, on_epoch)? {
-                Fitted::Done(m, h) => {
-                    equiarm_nn::checkpoint::save(&m, &weights)?;
-                    Fitted::Done((), h)
-                }
-                Fitted::Stopped(e) => Fitted::Stopped(e),
-            }
+            train_net(&|d| Ok(RotCnnNet::new(&ncfg, &init, d)?), cfg, splits, device, out, ckpt, on_epoch)?
         }
     };
     let history = match fitted {

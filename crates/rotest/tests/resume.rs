@@ -3,6 +3,8 @@
 //! of another configuration or a damaged one is refused naming it; a run directory another process
 //! trains in is refused (the grid skips it); a stopped grid continues the run it stopped.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -26,19 +28,9 @@ fn data(pairs: usize, seed: u64) -> Dataset {
     generate(&cfg, pairs, seed).unwrap()
 }
 
-/// A net of hidden 8 on 16 px random crops of 19 px images, 6 epochs of 12 pairs in batches of 8.
+/// The tests' net on 16 px random crops of 19 px images, 6 epochs of 12 pairs.
 fn tiny(model: ModelKind) -> TrainConfig {
-    TrainConfig {
-        hidden: 8,
-        input: 16,
-        val_pairs: 4,
-        test_pairs: 4,
-        batch: 8,
-        lr: 1e-3,
-        min_epochs: 6,
-        max_epochs: 6,
-        ..TrainConfig::paper(model, 12, 3)
-    }
+    TrainConfig { lr: 1e-3, min_epochs: 6, max_epochs: 6, ..common::tiny(model, 12, 3) }
 }
 
 /// The record without the wall times, which differ between any two runs.
@@ -127,37 +119,11 @@ fn a_run_directory_another_process_trains_in_is_refused() {
 /// after which epoch, and the same command continues it, then skips a run another process holds.
 #[test]
 fn a_grid_stopped_inside_a_run_continues_it_from_its_checkpoint() {
-    use equiarm_rotest::cli::{RotestCommand, TrainOpts, Variant, run};
-    use equiarm_rotest::grid::{GridArgs, status};
+    use equiarm_rotest::cli::{RotestCommand, Variant, run};
+    use equiarm_rotest::grid::status;
     let root = scratch("grid");
     data(12, 7).write(&root.join("data").join("none")).unwrap();
-    let opts = TrainOpts {
-        no_crop: false,
-        paper: false,
-        hidden: Some(8),
-        input: Some(16),
-        val_pairs: 4,
-        test_pairs: 4,
-        lr: 1e-3,
-        batch: 8,
-        min_epochs: 4,
-        patience: 4,
-        max_epochs: 4,
-        device: "cpu".into(),
-        matmul: Default::default(),
-        checkpoint_minutes: 60.0,
-    };
-    let args = GridArgs {
-        data: root.join("data"),
-        runs: root.join("runs"),
-        settings: "none".into(),
-        sizes: vec![4],
-        seeds: vec![0, 1],
-        variants: vec![Variant::Cnn],
-        pairs: 12,
-        opts,
-        report: root.join("report"),
-    };
+    let args = common::grid_args(&root, vec![Variant::Cnn], vec![0, 1], 4);
     let seed_dir = |s: u64| root.join("runs").join("none").join("cnn").join("4").join(format!("s{s}"));
     // asked before the dataset and before seed 0, then after seed 0's epochs 1 and 2: stop there
     let asked = std::cell::Cell::new(0);

@@ -2,6 +2,8 @@
 //! damaged input naming the pair; the bound is 0.625 on invert-label data and 1 on clean data; a
 //! trained C8 network's prediction is invariant to rotating both images by 90° (and a CNN's is not).
 
+mod common;
+
 use std::path::PathBuf;
 
 use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
@@ -137,17 +139,7 @@ fn values(t: Tensor<2>) -> Vec<f32> {
     t.into_data().try_to_vec::<f32>().unwrap()
 }
 
-/// A net of hidden 8 on 16 px crops, trained on few pairs in batches of 8 (the tests' size).
-fn tiny(model: ModelKind, train_pairs: usize, seed: u64) -> TrainConfig {
-    TrainConfig {
-        hidden: 8,
-        input: 16,
-        val_pairs: 4,
-        test_pairs: 4,
-        batch: 8,
-        ..TrainConfig::paper(model, train_pairs, seed)
-    }
-}
+use common::tiny;
 
 #[test]
 fn a_trained_c8_net_predicts_the_same_class_for_both_images_rotated_by_90_degrees() {
@@ -227,39 +219,13 @@ fn tiny_grid(
     equiarm_rotest::cli::RotestCommand::Grid(grid_args(root, variants, seeds))
 }
 
-/// The options of [`tiny_grid`] (what `rotest status` takes too).
+/// The options of [`tiny_grid`] (what `rotest status` takes too): one epoch a run.
 fn grid_args(
     root: &std::path::Path,
     variants: Vec<equiarm_rotest::cli::Variant>,
     seeds: Vec<u64>,
 ) -> equiarm_rotest::grid::GridArgs {
-    let opts = equiarm_rotest::cli::TrainOpts {
-        no_crop: false,
-        paper: false,
-        hidden: Some(8),
-        input: Some(16),
-        val_pairs: 4,
-        test_pairs: 4,
-        lr: 1e-3,
-        batch: 8,
-        min_epochs: 1,
-        patience: 1,
-        max_epochs: 1,
-        device: "cpu".into(),
-        matmul: Default::default(),
-        checkpoint_minutes: 5.0,
-    };
-    equiarm_rotest::grid::GridArgs {
-        data: root.join("data"),
-        runs: root.join("runs"),
-        settings: "none".into(),
-        sizes: vec![4],
-        seeds,
-        variants,
-        pairs: 12,
-        opts,
-        report: root.join("report"),
-    }
+    common::grid_args(root, variants, seeds, 1)
 }
 
 /// `rotest grid --variants cnn` trains the CNN alone, writes the report, and skips the run the
