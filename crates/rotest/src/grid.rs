@@ -173,6 +173,7 @@ pub fn status(args: &GridArgs) -> Result<String> {
     for r in plan.iter().filter(|r| r.state.to_train()) {
         let what = match (r.state, crate::resume::find(&r.dir)) {
             (RunState::New, _) => "not started".to_string(),
+            _ if equiarm_train::rundir::RunDirLock::is_held(&r.dir) => "in training now".to_string(),
             (_, Some(dir)) => match crate::resume::read_state(&dir) {
                 Ok(state) => format!("unfinished, checkpoint after epoch {}", state.epoch),
                 Err(e) => format!("unfinished, unreadable checkpoint ({e})"),

@@ -116,7 +116,8 @@ fn a_run_directory_another_process_trains_in_is_refused() {
 }
 
 /// The grid stopped in the middle of a run: that run keeps a checkpoint, `rotest status` says
-/// after which epoch, and the same command continues it, then skips a run another process holds.
+/// after which epoch, and the same command continues it, then skips a run another process holds
+/// (which `rotest status` says is in training now).
 #[test]
 fn a_grid_stopped_inside_a_run_continues_it_from_its_checkpoint() {
     use equiarm_rotest::cli::{RotestCommand, Variant, run};
@@ -139,6 +140,8 @@ fn a_grid_stopped_inside_a_run_continues_it_from_its_checkpoint() {
     // seed 1 is held by another process: the grid continues seed 0, skips seed 1 and writes the
     // report of what is finished
     let claim = equiarm_train::rundir::RunDirLock::acquire(&seed_dir(1)).unwrap();
+    let text = status(&args).unwrap();
+    assert!(text.contains(&format!("in training now: {}\n", seed_dir(1).display())), "{text}");
     assert_eq!(run(RotestCommand::Grid(args.clone()), &|| false).unwrap(), 0);
     let rec: RunRecord = serde_json::from_slice(&std::fs::read(seed_dir(0).join("run.json")).unwrap()).unwrap();
     assert_eq!(rec.history.iter().map(|e| e.epoch).collect::<Vec<_>>(), [1, 2, 3, 4]);

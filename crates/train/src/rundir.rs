@@ -98,6 +98,16 @@ impl RunDirLock {
         Ok(Some(RunDirLock { _file: file }))
     }
 
+    /// Whether a process holds the claim on `run_dir` now (it is training there), without claiming
+    /// it or creating anything: false for a directory without `.lock` or where locks are not
+    /// supported.
+    pub fn is_held(run_dir: &Path) -> bool {
+        let Ok(file) = std::fs::OpenOptions::new().read(true).write(true).open(run_dir.join(".lock")) else {
+            return false;
+        };
+        matches!(file.try_lock(), Err(std::fs::TryLockError::WouldBlock))
+    }
+
     /// Claim `run_dir` for a run that starts there: a new run ([`RunDirLock::acquire_new`]), or
     /// one that resumes `resume` in its own run directory, which may hold that run.
     pub fn acquire_for(run_dir: &Path, resume: Option<&Path>, force: bool) -> Result<Self, TrainError> {
@@ -200,7 +210,10 @@ mod tests {
         let e = RunDirLock::acquire(dir).unwrap_err().to_string();
         assert!(e.contains(&*dir.to_string_lossy()) && e.contains("in use by another training process"), "{e}");
         assert!(e.contains(&format!("pid {}", std::process::id())) && e.contains("--run-dir"), "{e}");
+        assert!(RunDirLock::is_held(dir));
         drop(first);
+        assert!(!RunDirLock::is_held(dir), "a released claim is free");
+        assert!(!RunDirLock::is_held(&dir.join("missing")) && !dir.join("missing").exists());
         let again = RunDirLock::acquire(dir).unwrap();
         drop(again);
     }
