@@ -527,17 +527,6 @@ pub struct Checkpointing<'a> {
     pub stop: &'a dyn Fn() -> bool,
 }
 
-fn never() -> bool {
-    false
-}
-
-impl Checkpointing<'static> {
-    /// A checkpoint every `minutes`; never stopped.
-    pub fn every_minutes(minutes: f64) -> Self {
-        Checkpointing { every: Duration::from_secs_f64(minutes.max(0.0) * 60.0), stop: &never }
-    }
-}
-
 /// How [`run_with`] ended.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Outcome {
@@ -641,34 +630,18 @@ impl<M: Classifier> Progress<M> {
     }
 }
 
-/// How [`fit_from`] ended.
+/// How [`fit`] ended.
 enum Fitted<M> {
     Done(M, Vec<EpochRecord>),
     Stopped(usize),
 }
 
-/// Trains `model` (built on an autodiff device) on `train`, evaluating on `val` and `test` after each
-/// epoch; keeps the weights of the best validation epoch. `on_epoch` sees each epoch's record.
-pub fn fit<M: Classifier>(
-    model: M,
-    cfg: &TrainConfig,
-    train: &Samples,
-    val: &Samples,
-    test: &Samples,
-    device: &Device,
-    on_epoch: &mut dyn FnMut(&EpochRecord),
-) -> (M, Vec<EpochRecord>) {
-    match fit_from(Progress::new(model, cfg), cfg, train, val, test, device, None, on_epoch) {
-        Ok(Fitted::Done(m, h)) => (m, h),
-        // without checkpoints it neither stops nor writes anything
-        Ok(Fitted::Stopped(_)) | Err(_) => unreachable!("fit without checkpoints cannot stop or fail"),
-    }
-}
-
-/// [`fit`] from `p` (a fresh start or a checkpoint), writing checkpoints into the run directory
-/// with `ckpt` (none without).
+/// Trains the network of `p` (a fresh start or a checkpoint; on an autodiff device) on `train`,
+/// evaluating on `val` and `test` after each epoch, and keeps the weights of the best validation
+/// epoch; `on_epoch` sees each epoch's record. Writes checkpoints into the run directory with `ckpt`
+/// (none without), and stops when it says.
 #[allow(clippy::too_many_arguments)]
-fn fit_from<M: Classifier>(
+fn fit<M: Classifier>(
     mut p: Progress<M>,
     cfg: &TrainConfig,
     train: &Samples,
@@ -764,7 +737,7 @@ fn train_net<M: Classifier>(
     on_epoch: &mut dyn FnMut(&EpochRecord),
 ) -> Result<Fitted<()>> {
     let start = Progress::start(out, cfg, device, build)?;
-    match fit_from(start, cfg, train, val, test, &device.clone().autodiff(), ckpt.map(|c| (out, c)), on_epoch)? {
+    match fit(start, cfg, train, val, test, &device.clone().autodiff(), ckpt.map(|c| (out, c)), on_epoch)? {
         Fitted::Done(m, history) => {
             equiarm_nn::checkpoint::save(&m, &out.join("best.safetensors"))?;
             Ok(Fitted::Done((), history))
@@ -780,7 +753,7 @@ fn net_config(cfg: &TrainConfig) -> NetConfig {
 
 /// The whole run on `device` (a plain device, e.g. from `equiarm_nn::device::open`; autodiff is
 /// added here): split `ds`, prepare the samples (with the image-transformation copies), build the
-/// network from `cfg.seed`, [`fit`], write `out/run.json` and the best weights
+/// network from `cfg.seed`, train it, write `out/run.json` and the best weights
 /// `out/best.safetensors`. Returns the record. Continues from the checkpoint in `out` if there is
 /// one, and writes none ([`run_with`] does).
 pub fn run(
