@@ -225,9 +225,9 @@ pub fn run(args: &GridArgs, stop: &dyn Fn() -> bool) -> Result<i32> {
             if r.dir.join("run.json").is_file() {
                 continue;
             }
-            if let Some(dir) = crate::resume::find(&r.dir) {
-                let epoch = crate::resume::read_state(&dir).map(|s| s.epoch).unwrap_or(0);
-                println!("{}: continuing from its checkpoint after epoch {epoch}", r.dir.display());
+            // (an unreadable checkpoint is reported by run_with, naming its file)
+            if let Some(Ok(state)) = crate::resume::find(&r.dir).map(|d| crate::resume::read_state(&d)) {
+                println!("{}: continuing from its checkpoint after epoch {}", r.dir.display(), state.epoch);
             }
             match crate::train::run_with(&ds, &r.cfg, &device, &r.dir, Some(&ckpt), &mut |_| {}) {
                 Ok(Outcome::Finished(rec)) => {
