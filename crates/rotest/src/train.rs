@@ -793,6 +793,8 @@ pub fn run_with(
     let _claim = match equiarm_train::rundir::RunDirLock::try_acquire(out) {
         Ok(Some(claim)) => claim,
         Ok(None) => return Err(RotestError::Busy { path: out.to_path_buf() }),
+        // creating the directory or its lock file failed (try_acquire reports nothing else)
+        Err(equiarm_train::TrainError::Io { path, message }) => return Err(RotestError::Format { path, message }),
         Err(e) => return Err(RotestError::Format { path: out.to_path_buf(), message: e.to_string() }),
     };
     let init = Init::new(cfg.seed);
