@@ -324,6 +324,16 @@ fn main() -> std::process::ExitCode {
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Rotest(c) => {
+            // burn materialises a loaded optimiser record (a rotest checkpoint's Adam state) on its
+            // default device before moving it to the training device, and in the GPU build that
+            // default is Vulkan: a resumed CPU run would start a Vulkan instance (or fail without a
+            // driver). rotest names its device itself (--device), so the default is the CPU unless
+            // the user set BURN_DEVICE. Set here, before any thread of this process reads the
+            // environment.
+            if std::env::var_os("BURN_DEVICE").is_none() {
+                // SAFETY: no other thread runs yet: logging is set up, the subcommand not started.
+                unsafe { std::env::set_var("BURN_DEVICE", "flex") };
+            }
             // Only `train` and `grid` stop with a checkpoint on a signal; the other subcommands keep
             // the default action (end at once).
             let stop =
