@@ -1,6 +1,7 @@
 //! The experiment's pieces end to end at toy sizes: the dataset file round-trips and refuses
 //! damaged input naming the pair; the bound is 0.625 on invert-label data and 1 on clean data; a
-//! trained C8 network's prediction is invariant to rotating both images by 90° (and a CNN's is not).
+//! trained C8 network's prediction is invariant to rotating both images by 90° (and a CNN's is not),
+//! also as `rotest invariance` measures it.
 
 mod common;
 
@@ -184,6 +185,17 @@ fn a_trained_c8_net_predicts_the_same_class_for_both_images_rotated_by_90_degree
         assert!(err < 1e-4, "logits change by {err} (relative) under a 90° rotation");
         assert_eq!(train::argmax_rows(net.logits(xr.clone())), train::argmax_rows(net.logits(x.clone())));
     }
+    // `rotest invariance` measures this checkpoint on the run's own test split: unrotated, it finds
+    // the run's test accuracy; under 90°, 180° and 270° it finds every prediction unchanged
+    let (back, agreement) = train::run_agreement(&ds, &out, &dev, false).unwrap();
+    assert_eq!(back, rec);
+    assert_eq!(agreement.len(), 8);
+    for k in [0, 2, 4, 6] {
+        let (unchanged, acc) = agreement[k];
+        assert_eq!(unchanged, 1.0, "{}°: {unchanged}", 45 * k);
+        assert!((acc - rec.test_acc).abs() < 1e-9, "{}°: accuracy {acc}, the run's {}", 45 * k, rec.test_acc);
+    }
+    assert!(agreement.iter().all(|&(u, a)| (0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&a)));
     // the CNN has no such symmetry: the same check fails for it
     let cnn = RotCnnNet::new(&ncfg, &Init::new(0), &dev).unwrap();
     let (a, b) = (values(cnn.logits(x.clone())), values(cnn.logits(rot90_batch(&x))));
