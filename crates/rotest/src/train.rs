@@ -794,8 +794,10 @@ pub fn run_with(
         Ok(Some(claim)) => claim,
         Ok(None) => return Err(RotestError::Busy { path: out.to_path_buf() }),
         // creating the directory or its lock file failed (try_acquire reports nothing else)
-        Err(equiarm_train::TrainError::Io { path, message }) => return Err(RotestError::Format { path, message }),
-        Err(e) => return Err(RotestError::Format { path: out.to_path_buf(), message: e.to_string() }),
+        Err(equiarm_train::TrainError::Io { path, message }) => {
+            return Err(RotestError::Io { path, error: std::io::Error::other(message) });
+        }
+        Err(e) => return Err(RotestError::Io { path: out.to_path_buf(), error: std::io::Error::other(e.to_string()) }),
     };
     let init = Init::new(cfg.seed);
     let ncfg = net_config(cfg);
