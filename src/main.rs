@@ -8,6 +8,7 @@ use clap::{Parser, Subcommand};
 use equiarm_msgs::{ALL_TYPES, TypeInfo};
 use equiarm_nodes::echo::{QosChoice, echo};
 use equiarm_nodes::ros::RosOptions;
+use equiarm_types::OBS_PLANES;
 
 #[derive(Parser)]
 #[command(name = "equiarm", version, about = "ROS 2 node suite for robot learning with equivariant models")]
@@ -260,9 +261,9 @@ struct SimCommand {
 enum SimSubcommand {
     /// Writes the colour, depth (16-bit, mm) and segmentation PNGs of a task's reset scene.
     Snapshot {
-        /// Task name (see `equiarm sim --help`).
-        #[arg(long)]
-        task: String,
+        /// Task.
+        #[arg(long, value_enum)]
+        task: equiarm_types::TaskKind,
         /// Output folder (created if missing); files are `<task>_color.png`, `_depth.png`, `_seg.png`.
         #[arg(long)]
         out: std::path::PathBuf,
@@ -272,9 +273,9 @@ enum SimSubcommand {
         /// Expert steps to take before the picture.
         #[arg(long, default_value_t = 0)]
         steps: u32,
-        /// Camera preset (side, angle15 … angle90).
-        #[arg(long)]
-        view: Option<String>,
+        /// Camera preset.
+        #[arg(long, value_enum)]
+        view: Option<equiarm_types::ViewPreset>,
     },
 }
 
@@ -445,7 +446,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 let dir = equiarm_train::rundir::find_checkpoint(&ckpt)?;
                 let m = equiarm_sac::learner::read_manifest(&dir)?;
                 let a = &m.config.agent;
-                let cfg = equiarm_nn::nets::NetConfig { hidden: a.hidden, input_size: a.input_size, in_channels: 5 };
+                let cfg =
+                    equiarm_nn::nets::NetConfig { hidden: a.hidden, input_size: a.input_size, in_channels: OBS_PLANES };
                 (dir.join("actor.safetensors"), a.model.name().to_string(), cfg)
             } else {
                 (ckpt, net, config.config(None))
@@ -510,7 +512,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             println!("recovered {} messages into {}", r.summary.messages, r.summary.dir.display());
         }
         Command::Sim(SimCommand { sub: Some(SimSubcommand::Snapshot { task, out, seed, steps, view }), .. }) => {
-            for f in equiarm_nodes::sim::snapshot(&task, seed, steps, view.as_deref(), &out)? {
+            for f in equiarm_nodes::sim::snapshot(task, seed, steps, view, &out)? {
                 println!("{}", f.display());
             }
         }

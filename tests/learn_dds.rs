@@ -338,7 +338,10 @@ fn result(env: &str, episode: u32, success: bool, expert: bool) -> EpisodeResult
 
 /// A trainer's ingest of `SIZE`-pixel frames, with `/eval` as its eval env.
 fn ingest() -> Ingest {
-    Ingest::new(&TrainConfig { image_size: SIZE as usize, ..TrainConfig::reduced("block_pulling") }, "/eval")
+    Ingest::new(
+        &TrainConfig { image_size: SIZE as usize, ..TrainConfig::reduced(equiarm_types::TaskKind::BlockPulling) },
+        "/eval",
+    )
 }
 
 #[test]
@@ -523,7 +526,7 @@ fn a_replay_full_of_expert_transitions_drops_further_rows_and_training_goes_on()
         demo_episodes: 0,
         eval_every: 0,
         checkpoint_every: 0,
-        ..TrainConfig::reduced("block_pulling")
+        ..TrainConfig::reduced(equiarm_types::TaskKind::BlockPulling)
     };
     cfg.replay.capacity = 6;
     (cfg.agent.input_size, cfg.agent.hidden) = (16, 8);

@@ -13,6 +13,7 @@ use std::sync::Arc;
 use equiarm_msgs::{RosMessage, builtin_interfaces::Time, cdr};
 
 use crate::mutate::Shape;
+use equiarm_types::OBS_PLANES;
 
 /// A target could not be set up (its seeds or its harness).
 #[derive(Debug, thiserror::Error)]
@@ -579,7 +580,7 @@ fn env_config_seeds(_: &Path) -> Result<Vec<Vec<u8>>, SetupError> {
     let mut configs: Vec<EnvConfig> = TaskKind::ALL.iter().map(|&t| EnvConfig::new(t)).collect();
     for (i, preset) in ViewPreset::ALL.iter().enumerate() {
         let mut c = EnvConfig::new(TaskKind::ALL[i % TaskKind::ALL.len()]);
-        c.camera = preset.config();
+        c.camera = (*preset).into();
         c.corruption.random_reflection = i % 2 == 0;
         c.corruption.occlusion_projection = i % 3 == 0;
         c.render = i % 4 != 3;
@@ -628,10 +629,10 @@ fn train_config_seeds(_: &Path) -> Result<Vec<Vec<u8>>, SetupError> {
     let mut configs = Vec::new();
     for (i, task) in equiarm_sim::TaskKind::ALL.iter().enumerate() {
         let preset = Preset::ALL[i % Preset::ALL.len()];
-        configs.push(TrainConfig::preset(preset, task.name()));
+        configs.push(TrainConfig::preset(preset, *task));
     }
-    let mut drq = TrainConfig::reduced("block_pulling");
-    drq.augmentation = Augmentation::Drq { k: 2, m: 2 };
+    let mut drq = TrainConfig::reduced(equiarm_types::TaskKind::BlockPulling);
+    drq.augmentation = Augmentation::PAPER_DRQ;
     drq.agent.lr_final = Some(1e-4);
     configs.push(drq);
     let mut out = Vec::new();
@@ -670,7 +671,7 @@ fn small_actor() -> Result<equiarm_nn::nets::EquiActor, SetupError> {
         init::Init,
         nets::{EquiActor, NetConfig},
     };
-    let cfg = NetConfig { hidden: 8, input_size: 8, in_channels: 5 };
+    let cfg = NetConfig { hidden: 8, input_size: 8, in_channels: OBS_PLANES };
     EquiActor::new(&cfg, &Init::new(1), &equiarm_nn::device::cpu())
         .map_err(|e| SetupError::project("building the actor")(&e))
 }
@@ -737,7 +738,7 @@ const REPLAY_BODY: usize = CHECKPOINT_FILES.len();
 const REPLAY_HEAD: usize = 12;
 
 fn tiny_config() -> equiarm_sac::config::TrainConfig {
-    let mut cfg = equiarm_sac::config::TrainConfig::reduced("block_pulling");
+    let mut cfg = equiarm_sac::config::TrainConfig::reduced(equiarm_types::TaskKind::BlockPulling);
     cfg.image_size = 10;
     cfg.agent.input_size = 8;
     cfg.agent.hidden = 8;

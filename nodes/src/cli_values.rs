@@ -136,3 +136,42 @@ mod tests {
         assert!(positive_steps("0").is_err() && steps("1000001").is_err());
     }
 }
+
+/// `--lr-final`: a learning rate to anneal to, or `none` (constant).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LrFinal(pub Option<f64>);
+
+impl std::str::FromStr for LrFinal {
+    type Err = BadValue;
+    fn from_str(s: &str) -> Result<Self, BadValue> {
+        match s.trim() {
+            "none" => Ok(LrFinal(None)),
+            v => Ok(LrFinal(Some(number(v, "number or `none`")?))),
+        }
+    }
+}
+
+/// `--image FRAME:INPUT`: the rendered frame's side and the network input's, in pixels (the
+/// config's validation checks the pair).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ImageSizes {
+    /// Rendered frame side.
+    pub frame: usize,
+    /// Network input side (the crop).
+    pub input: usize,
+}
+
+impl std::str::FromStr for ImageSizes {
+    type Err = BadValue;
+    fn from_str(s: &str) -> Result<Self, BadValue> {
+        let bad =
+            || BadValue::NotANumber { given: s.to_string(), kind: "pair of sizes FRAME:INPUT, e.g. 76:64".into() };
+        let (f, i) = s.split_once(':').ok_or_else(bad)?;
+        Ok(ImageSizes { frame: f.trim().parse().map_err(|_| bad())?, input: i.trim().parse().map_err(|_| bad())? })
+    }
+}
+
+/// The help of a corruption flag, listing the names from the type.
+pub fn corruption_help() -> String {
+    format!("Symmetry corruptions (docs/paper.md §5): {}", equiarm_types::Corruption::help())
+}

@@ -3,9 +3,10 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context as _, bail};
-use equiarm_sac::agent::{AgentConfig, ModelKind};
+use anyhow::bail;
+use equiarm_sac::agent::AgentConfig;
 use equiarm_sac::config::{Preset, TrainConfig};
+use equiarm_types::{ModelKind, TaskKind};
 
 use equiarm_train::policy::PolicyMode;
 
@@ -22,15 +23,15 @@ pub struct PolicyArgs {
     /// latest checkpoint). Directories give the architecture from their manifest.
     #[arg(long)]
     pub checkpoint: Option<PathBuf>,
-    /// Network family when there is no manifest: equi, cnn, sen or ferm (default: the default preset's).
-    #[arg(long)]
-    pub model: Option<String>,
+    /// Network family when there is no manifest (default: the default preset's).
+    #[arg(long, value_enum)]
+    pub model: Option<ModelKind>,
     /// Hidden size when there is no manifest (default: the default preset's).
     #[arg(long)]
     pub hidden: Option<usize>,
     /// Frame and network input size as FRAME:INPUT when there is no manifest (default: the default preset's).
-    #[arg(long)]
-    pub image: Option<String>,
+    #[arg(long, value_name = "FRAME:INPUT")]
+    pub image: Option<crate::cli_values::ImageSizes>,
     /// Seed of the initial weights, the sampling noise and the random mode.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -68,19 +69,15 @@ pub fn architecture(args: &PolicyArgs) -> anyhow::Result<(AgentConfig, usize, Op
         let m = equiarm_sac::learner::read_manifest(&dir)?;
         return Ok((m.config.agent.clone(), m.config.image_size, Some(dir.join("actor.safetensors"))));
     }
-    let preset = TrainConfig::preset(Preset::DEFAULT, "block_pulling");
+    let preset = TrainConfig::preset(Preset::DEFAULT, TaskKind::BlockPulling);
     let mut agent = preset.agent.clone();
     let mut frame = preset.image_size;
-    if let Some(m) = &args.model {
-        agent.model =
-            ModelKind::parse(m).with_context(|| format!("unknown --model `{m}`: use equi, cnn, sen or ferm"))?;
+    if let Some(m) = args.model {
+        agent.model = m;
     }
     agent.hidden = args.hidden.unwrap_or(agent.hidden);
-    if let Some(img) = &args.image {
-        let (f, i) =
-            img.split_once(':').with_context(|| format!("--image `{img}`: expected FRAME:INPUT, e.g. 76:64"))?;
-        frame = f.parse().with_context(|| format!("--image `{img}`: frame size"))?;
-        agent.input_size = i.parse().with_context(|| format!("--image `{img}`: input size"))?;
+    if let Some(img) = args.image {
+        (frame, agent.input_size) = (img.frame, img.input);
     }
     if agent.input_size > frame {
         bail!("--image: the network input {} is larger than the frame {frame}", agent.input_size);

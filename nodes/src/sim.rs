@@ -38,8 +38,9 @@ use equiarm_msgs::{
     sensor_msgs::{CameraInfo, Image},
     std_msgs::Header,
 };
-use equiarm_sim::{Env, EnvConfig, TaskKind, ViewPreset};
+use equiarm_sim::{CameraConfig, Env, EnvConfig};
 use equiarm_train::stepper::{CAMERA_FRAME, SimStats, Step, Stepper};
+use equiarm_types::{Corruption, TaskKind, ViewPreset};
 use log::{debug, info};
 
 use crate::ros::{Publisher, RosNode, RosOptions, qos, shutdown_signal};
@@ -47,10 +48,9 @@ use crate::ros::{Publisher, RosNode, RosOptions, qos, shutdown_signal};
 /// Options of `equiarm sim` (the command line parses straight into this).
 #[derive(Clone, Debug, clap::Args)]
 pub struct SimArgs {
-    /// Task: block_pulling, block_pushing, block_picking, drawer_opening or block_in_bowl
-    /// (default: the config file's, else block_picking).
-    #[arg(long)]
-    pub task: Option<String>,
+    /// Task (default: the config file's, else block_picking).
+    #[arg(long, value_enum)]
+    pub task: Option<TaskKind>,
     /// Base seed. Episode k is reset with the k-th output (k = 0, 1, …) of a splitmix64 stream seeded
     /// with it (`equiarm_sim::rng::Rng::new(seed)`); each EpisodeResult carries the seed it used.
     #[arg(long, default_value_t = 0)]
@@ -59,13 +59,12 @@ pub struct SimArgs {
     #[arg(long, default_value = "/env0")]
     pub namespace: String,
     /// Camera preset: side (the paper's default view), angle15 … angle90 (the view-angle sweep).
-    #[arg(long)]
-    pub view: Option<String>,
-    /// Symmetry corruptions of the observations: none, or a comma-separated list of
-    /// random_reflection, occlusion_projection, gripper_only (docs/paper.md §5; the training
-    /// config's `corruption`, which the launch scripts pass on).
-    #[arg(long)]
-    pub corrupt: Option<String>,
+    #[arg(long, value_enum)]
+    pub view: Option<ViewPreset>,
+    /// Symmetry corruptions of the observations (the training config's `corruption`, which the
+    /// launch scripts pass on).
+    #[arg(long, value_name = "none|NAME,…", help = crate::cli_values::corruption_help())]
+    pub corrupt: Option<Corruption>,
     /// Camera elevation above the table plane, degrees in (0, 90] (overrides the preset).
     #[arg(long)]
     pub elevation_deg: Option<f64>,
@@ -106,14 +105,14 @@ pub fn env_config(args: &SimArgs) -> anyhow::Result<EnvConfig> {
         }
         None => EnvConfig::default(),
     };
-    if let Some(t) = &args.task {
-        cfg.task = parse_task(t)?;
+    if let Some(t) = args.task {
+        cfg.task = t;
     }
-    if let Some(v) = &args.view {
-        cfg.camera = parse_view(v)?.config();
+    if let Some(v) = args.view {
+        cfg.camera = CameraConfig::from(v);
     }
-    if let Some(c) = &args.corrupt {
-        cfg.corruption = equiarm_sim::env::Corruption::parse(c).with_context(|| format!("--corrupt '{c}'"))?;
+    if let Some(c) = args.corrupt {
+        cfg.corruption = c;
     }
     let cam = &mut cfg.camera;
     cam.elevation_deg = args.elevation_deg.unwrap_or(cam.elevation_deg);
@@ -123,22 +122,6 @@ pub fn env_config(args: &SimArgs) -> anyhow::Result<EnvConfig> {
         (cam.width, cam.height) = (r, r);
     }
     Ok(cfg)
-}
-
-/// A task by its command-line name; the error lists the names.
-pub fn parse_task(name: &str) -> anyhow::Result<TaskKind> {
-    TaskKind::from_name(name).with_context(|| {
-        let names: Vec<_> = TaskKind::ALL.iter().map(|t| t.name()).collect();
-        format!("unknown task '{name}'; tasks: {}", names.join(", "))
-    })
-}
-
-/// A camera preset by name; the error lists the names.
-pub fn parse_view(name: &str) -> anyhow::Result<ViewPreset> {
-    ViewPreset::from_name(name).with_context(|| {
-        let names: Vec<_> = ViewPreset::ALL.iter().map(|p| p.name()).collect();
-        format!("unknown view '{name}'; views: {}", names.join(", "))
-    })
 }
 
 /// Runs the node until `args.episodes` episodes ended, or SIGINT/SIGTERM.
@@ -152,9 +135,7 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
     let task = cfg.task.name();
     let scene = format!(
         "camera elevation {}°, {} px, corruption {}",
-        cfg.camera.elevation_deg,
-        cfg.camera.width,
-        cfg.corruption.name()
+        cfg.camera.elevation_deg, cfg.camera.width, cfg.corruption
     );
     let mut sim = Stepper::new(cfg, &env_name, args.seed, args.eval).context("building the simulated env")?;
     let mut node = RosNode::new(&args.namespace, "sim", opts)?;
@@ -276,10 +257,16 @@ impl CameraPublishers {
 
 /// `equiarm sim snapshot`: writes the colour, depth and segmentation PNGs of `task` after a reset with
 /// `seed` and `steps` expert steps into `out`; returns the paths written.
-pub fn snapshot(task: &str, seed: u64, steps: u32, view: Option<&str>, out: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    let mut cfg = EnvConfig::new(parse_task(task)?);
+pub fn snapshot(
+    task: TaskKind,
+    seed: u64,
+    steps: u32,
+    view: Option<ViewPreset>,
+    out: &Path,
+) -> anyhow::Result<Vec<PathBuf>> {
+    let mut cfg = EnvConfig::new(task);
     if let Some(v) = view {
-        cfg.camera = parse_view(v)?.config();
+        cfg.camera = CameraConfig::from(v);
     }
     let files = equiarm_sim::snapshot::snapshot_task(cfg, seed, steps, out)
         .with_context(|| format!("writing the snapshot of {task} into {}", out.display()))?;
@@ -297,8 +284,12 @@ mod tests {
         args: SimArgs,
     }
 
+    fn parse(a: &[&str]) -> Result<SimArgs, clap::Error> {
+        Cli::try_parse_from(std::iter::once("sim").chain(a.iter().copied())).map(|c| c.args)
+    }
+
     fn args(a: &[&str]) -> SimArgs {
-        Cli::parse_from(std::iter::once("sim").chain(a.iter().copied())).args
+        parse(a).unwrap()
     }
 
     #[test]
@@ -306,9 +297,9 @@ mod tests {
         let cfg = env_config(&args(&["--task", "drawer_opening", "--view", "angle30", "--resolution", "96"])).unwrap();
         assert_eq!(cfg.task, TaskKind::DrawerOpening);
         assert_eq!((cfg.camera.elevation_deg, cfg.camera.width, cfg.camera.height), (30.0, 96, 96));
-        let e = env_config(&args(&["--task", "stacking"])).unwrap_err().to_string();
+        let e = parse(&["--task", "stacking"]).unwrap_err().to_string();
         assert!(e.contains("'stacking'") && e.contains("block_in_bowl"), "{e}");
-        let e = env_config(&args(&["--view", "top"])).unwrap_err().to_string();
+        let e = parse(&["--view", "top"]).unwrap_err().to_string();
         assert!(e.contains("angle90"), "{e}");
     }
 
@@ -318,7 +309,7 @@ mod tests {
         let c = env_config(&args(&["--corrupt", "random_reflection,gripper_only"])).unwrap().corruption;
         assert!(c.random_reflection && c.gripper_only && !c.occlusion_projection, "{c:?}");
         assert_eq!(env_config(&args(&["--corrupt", "none"])).unwrap().corruption, Default::default());
-        let e = format!("{:#}", env_config(&args(&["--corrupt", "mirror"])).unwrap_err());
-        assert!(e.contains("--corrupt 'mirror'") && e.contains("`mirror`") && e.contains("random_reflection"), "{e}");
+        let e = parse(&["--corrupt", "mirror"]).unwrap_err().to_string();
+        assert!(e.contains("--corrupt") && e.contains("`mirror`") && e.contains("random_reflection"), "{e}");
     }
 }

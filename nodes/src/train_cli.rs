@@ -9,10 +9,10 @@ use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
 use equiarm_nn::burn::tensor::Device;
-use equiarm_sac::agent::ModelKind;
-use equiarm_sac::config::{Augmentation, Preset, TrainConfig};
+use equiarm_sac::config::{Preset, TrainConfig};
 use equiarm_train::inprocess::RunOptions;
 use equiarm_train::record::RunSummary;
+use equiarm_types::{Augmentation, AugmentationKind, Corruption, ModelKind, TaskKind, ViewPreset};
 
 use crate::signals::{CHECKPOINT_AND_STOP, stop_flag};
 
@@ -30,12 +30,12 @@ pub struct TrainArgs {
     /// JSON config file (replaces the preset; flags below still override it).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Task (block_pulling, block_pushing, block_picking, drawer_opening, block_in_bowl).
-    #[arg(long)]
-    pub task: Option<String>,
-    /// Network family: equi, cnn, sen or ferm (FERM also sets --augmentation to independent crops).
-    #[arg(long)]
-    pub model: Option<String>,
+    /// Task (default: block_pulling).
+    #[arg(long, value_enum)]
+    pub task: Option<TaskKind>,
+    /// Network family (FERM also sets --augmentation to independent crops).
+    #[arg(long, value_enum)]
+    pub model: Option<ModelKind>,
     /// Base seed.
     #[arg(long)]
     pub seed: Option<u64>,
@@ -66,25 +66,24 @@ pub struct TrainArgs {
     /// Anneal the learning rate from --lr to this value over the run (half cosine); `none` keeps it
     /// constant (the paper).
     #[arg(long, value_name = "LR|none")]
-    pub lr_final: Option<String>,
+    pub lr_final: Option<crate::cli_values::LrFinal>,
     /// Precision of the convolutions' matrix products: f32 (the default) or bf16 (Intel AMX:
     /// operands rounded to bfloat16, f32 sums; faster where the CPU has AMX). Part of the config
     /// (`agent.matmul`).
     #[arg(long)]
     pub matmul: Option<equiarm_nn::kernels::MatmulPrecision>,
     /// Rendered frame size and network input size, as FRAME:INPUT (e.g. 76:64, 152:128).
-    #[arg(long)]
-    pub image: Option<String>,
+    #[arg(long, value_name = "FRAME:INPUT")]
+    pub image: Option<crate::cli_values::ImageSizes>,
     /// Camera preset: side (the paper's oblique view), angle15 … angle90 (the view-angle sweep).
-    #[arg(long)]
-    pub view: Option<String>,
-    /// Symmetry corruptions: none, or a comma-separated list of random_reflection,
-    /// occlusion_projection, gripper_only (docs/paper.md §5).
-    #[arg(long)]
-    pub corrupt: Option<String>,
-    /// Augmentation: rad, drq (K = M = 2) or center.
-    #[arg(long)]
-    pub augmentation: Option<String>,
+    #[arg(long, value_enum)]
+    pub view: Option<ViewPreset>,
+    /// Symmetry corruptions (docs/paper.md §5).
+    #[arg(long, value_name = "none|NAME,…", help = crate::cli_values::corruption_help())]
+    pub corrupt: Option<Corruption>,
+    /// Augmentation (drq: K = M = 2).
+    #[arg(long, value_enum)]
+    pub augmentation: Option<AugmentationKind>,
     /// Checkpoint every N updates.
     #[arg(long)]
     pub checkpoint_every: Option<u64>,
@@ -158,63 +157,36 @@ impl TrainArgs {
 
     /// The validated config these options describe.
     pub fn build_config(&self) -> anyhow::Result<TrainConfig> {
-        let task = self.task.clone().unwrap_or_else(|| "block_pulling".into());
         let mut cfg = match &self.config {
             Some(path) => {
                 let text =
                     std::fs::read_to_string(path).with_context(|| format!("reading config {}", path.display()))?;
                 TrainConfig::from_json(&text).map_err(|e| anyhow::anyhow!("config {}: {e}", path.display()))?
             }
-            None => TrainConfig::preset(self.preset, &task),
+            None => TrainConfig::preset(self.preset, self.task.unwrap_or(TaskKind::BlockPulling)),
         };
-        if let Some(t) = &self.task
-            && (self.config.is_some() || t != &cfg.task)
-        {
-            cfg.task = t.clone();
-        }
-        if let Some(m) = &self.model {
-            cfg.agent.model = ModelKind::parse(m)
-                .ok_or_else(|| anyhow::anyhow!("unknown --model `{m}`: use equi, cnn, sen or ferm"))?;
-            if cfg.agent.model == ModelKind::Ferm && self.augmentation.is_none() {
+        if let Some(m) = self.model {
+            cfg.agent.model = m;
+            if m == ModelKind::Ferm && self.augmentation.is_none() {
                 // FERM crops obs and next_obs independently (docs/paper.md §1.10).
-                cfg.augmentation = Augmentation::Drq { k: 1, m: 1 };
+                cfg.augmentation = Augmentation::FERM;
             }
         }
         macro_rules! set {
             ($($flag:ident => $($field:ident).+),* $(,)?) => { $( if let Some(v) = self.$flag { cfg.$($field).+ = v; } )* };
         }
-        set!(seed => seed, total_updates => total_updates, num_envs => num_envs, eval_every => eval_every,
+        set!(task => task, seed => seed, total_updates => total_updates, num_envs => num_envs, eval_every => eval_every,
              eval_episodes => eval_episodes, demo_episodes => demo_episodes, batch_size => batch_size,
-             hidden => agent.hidden, lr => agent.lr, checkpoint_every => checkpoint_every, training_starts => training_starts);
-        if let Some(f) = &self.lr_final {
-            cfg.agent.lr_final = match f.as_str() {
-                "none" => None,
-                v => Some(v.parse().with_context(|| format!("--lr-final `{v}`: expected a number or `none`"))?),
-            };
+             hidden => agent.hidden, lr => agent.lr, checkpoint_every => checkpoint_every, training_starts => training_starts,
+             matmul => agent.matmul, view => view, corrupt => corruption);
+        if let Some(f) = self.lr_final {
+            cfg.agent.lr_final = f.0;
         }
-        if let Some(p) = self.matmul {
-            cfg.agent.matmul = p;
+        if let Some(img) = self.image {
+            (cfg.image_size, cfg.agent.input_size) = (img.frame, img.input);
         }
-        if let Some(img) = &self.image {
-            let (f, i) = img
-                .split_once(':')
-                .ok_or_else(|| anyhow::anyhow!("--image `{img}`: expected FRAME:INPUT, e.g. 76:64"))?;
-            cfg.image_size = f.parse().with_context(|| format!("--image `{img}`: frame size"))?;
-            cfg.agent.input_size = i.parse().with_context(|| format!("--image `{img}`: input size"))?;
-        }
-        if let Some(v) = &self.view {
-            cfg.view = v.clone();
-        }
-        if let Some(c) = &self.corrupt {
-            cfg.corruption = c.clone();
-        }
-        if let Some(a) = &self.augmentation {
-            cfg.augmentation = match a.as_str() {
-                "rad" => Augmentation::Rad,
-                "drq" => Augmentation::Drq { k: 2, m: 2 },
-                "center" => Augmentation::Center,
-                other => bail!("unknown --augmentation `{other}`: use rad, drq or center"),
-            };
+        if let Some(a) = self.augmentation {
+            cfg.augmentation = a.into();
         }
         equiarm_train::config::check(&cfg)?;
         Ok(cfg)
@@ -265,15 +237,18 @@ mod tests {
     #[test]
     fn flags_override_the_preset() {
         let base = config(&[]).unwrap();
-        assert_eq!(base, TrainConfig::reduced16("block_pulling"));
+        assert_eq!(base, TrainConfig::reduced16(TaskKind::BlockPulling));
         let cfg = config(&["--task", "drawer_opening", "--lr", "0.003", "--hidden", "16", "--image", "76:64"]).unwrap();
-        assert_eq!(cfg.task, "drawer_opening");
+        assert_eq!(cfg.task, TaskKind::DrawerOpening);
         assert_eq!(cfg.agent.lr, 0.003);
         assert_eq!(cfg.agent.hidden, 16);
         assert_eq!((cfg.image_size, cfg.agent.input_size), (76, 64));
         assert_eq!(cfg.batch_size, base.batch_size);
         let cfg = config(&["--view", "angle30", "--corrupt", "gripper_only,random_reflection"]).unwrap();
-        assert_eq!((cfg.view.as_str(), cfg.corruption.as_str()), ("angle30", "gripper_only,random_reflection"));
+        assert_eq!(
+            (cfg.view, cfg.corruption.to_string().as_str()),
+            (ViewPreset::Angle30, "random_reflection,gripper_only")
+        );
     }
 
     #[test]
@@ -309,7 +284,7 @@ mod tests {
         let e = config(&["--corrupt", "mirror"]).unwrap_err().to_string();
         assert!(e.contains("corruption") && e.contains("`mirror`"), "{e}");
         let e = config(&["--view", "top"]).unwrap_err().to_string();
-        assert!(e.contains("view") && e.contains("`top`"), "{e}");
+        assert!(e.contains("--view") && e.contains("top") && e.contains("angle90"), "{e}");
         let e = config(&["--preset", "huge"]).unwrap_err().to_string();
         assert!(e.contains("huge"), "{e}");
     }

@@ -27,8 +27,8 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use equiarm_sac::agent::ModelKind;
-use equiarm_sac::config::{Augmentation, Preset, TrainConfig};
+use equiarm_sac::config::{Preset, TrainConfig};
+use equiarm_types::{Augmentation, Corruption, ModelKind, TaskKind, ViewPreset};
 use serde::Deserialize;
 
 use crate::error::{ExperimentError, Result};
@@ -50,14 +50,9 @@ pub struct Variant {
 pub const VARIANTS: [Variant; 5] = [
     Variant { name: "equi", label: "Equi SAC + RAD", model: ModelKind::Equi, augmentation: Augmentation::Rad },
     Variant { name: "cnn", label: "CNN SAC + RAD", model: ModelKind::Cnn, augmentation: Augmentation::Rad },
-    Variant {
-        name: "cnn_drq",
-        label: "CNN SAC + DrQ",
-        model: ModelKind::Cnn,
-        augmentation: Augmentation::Drq { k: 2, m: 2 },
-    },
+    Variant { name: "cnn_drq", label: "CNN SAC + DrQ", model: ModelKind::Cnn, augmentation: Augmentation::PAPER_DRQ },
     Variant { name: "sen", label: "SEN + RAD", model: ModelKind::Sen, augmentation: Augmentation::Rad },
-    Variant { name: "ferm", label: "FERM", model: ModelKind::Ferm, augmentation: Augmentation::Drq { k: 1, m: 1 } },
+    Variant { name: "ferm", label: "FERM", model: ModelKind::Ferm, augmentation: Augmentation::FERM },
 ];
 
 impl Variant {
@@ -74,12 +69,12 @@ struct GridFile {
     description: String,
     #[serde(default = "default_preset")]
     preset: String,
-    tasks: Vec<String>,
+    tasks: Vec<TaskKind>,
     variants: Vec<String>,
     #[serde(default = "default_views")]
-    views: Vec<String>,
+    views: Vec<ViewPreset>,
     #[serde(default = "default_corruptions")]
-    corruptions: Vec<String>,
+    corruptions: Vec<Corruption>,
     seeds: Vec<u64>,
     #[serde(default = "default_heldout")]
     heldout_episodes: usize,
@@ -88,7 +83,7 @@ struct GridFile {
     #[serde(default)]
     runs: Option<PathBuf>,
     #[serde(default)]
-    updates: BTreeMap<String, u64>,
+    updates: BTreeMap<TaskKind, u64>,
     #[serde(default)]
     config: toml::Table,
     #[serde(default)]
@@ -98,11 +93,11 @@ struct GridFile {
 fn default_preset() -> String {
     Preset::DEFAULT.name().into()
 }
-fn default_views() -> Vec<String> {
-    vec!["side".into()]
+fn default_views() -> Vec<ViewPreset> {
+    vec![ViewPreset::Side]
 }
-fn default_corruptions() -> Vec<String> {
-    vec!["none".into()]
+fn default_corruptions() -> Vec<Corruption> {
+    vec![Corruption::NONE]
 }
 fn default_heldout() -> usize {
     100
@@ -114,14 +109,14 @@ fn default_checkpoint_minutes() -> f64 {
 /// One run of a grid.
 #[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct Cell {
-    /// Task name.
-    pub task: String,
+    /// Task.
+    pub task: TaskKind,
     /// Variant name ([`VARIANTS`]).
     pub variant: String,
     /// Camera preset.
-    pub view: String,
-    /// Corruption setting (`none` or comma-separated names, in their canonical order).
-    pub corruption: String,
+    pub view: ViewPreset,
+    /// Corruption setting.
+    pub corruption: Corruption,
     /// Seed.
     pub seed: u64,
 }
@@ -130,14 +125,14 @@ impl Cell {
     /// The run directory below the experiment's: `TASK/VARIANT/VIEW/CORRUPTION/sSEED` (commas of
     /// the corruption written as `+`).
     pub fn rel_dir(&self) -> PathBuf {
-        [&self.task, &self.variant, &self.view, &self.corruption.replace(',', "+"), &format!("s{}", self.seed)]
-            .iter()
-            .collect()
+        let corruption = self.corruption.to_string().replace(',', "+");
+        [self.task.name(), &self.variant, self.view.name(), &corruption, &format!("s{}", self.seed)].iter().collect()
     }
 
-    /// The group a report draws as one curve of one figure: everything but the seed.
+    /// The group a report draws as one curve of one figure: everything but the seed, by name (so
+    /// groups sort as their names do).
     pub fn group(&self) -> (String, String, String, String) {
-        (self.task.clone(), self.view.clone(), self.corruption.clone(), self.variant.clone())
+        (self.task.to_string(), self.view.to_string(), self.corruption.to_string(), self.variant.clone())
     }
 }
 
@@ -162,7 +157,7 @@ pub struct Grid {
     /// The paper's figure per `task/variant` (discounted return), for the report.
     pub paper: BTreeMap<String, f64>,
     cells: Vec<Cell>,
-    updates: BTreeMap<String, u64>,
+    updates: BTreeMap<TaskKind, u64>,
     overrides: serde_json::Value,
 }
 
@@ -182,6 +177,7 @@ impl Grid {
             let names: Vec<&str> = Preset::ALL.iter().map(|p| p.name()).collect();
             bad(format!("preset: unknown preset `{}`: use {}", f.preset, names.join(", ")))
         })?;
+        let corruptions = &f.corruptions;
         for (key, list) in [
             ("tasks", f.tasks.len()),
             ("variants", f.variants.len()),
@@ -198,11 +194,6 @@ impl Grid {
                 let names: Vec<&str> = VARIANTS.iter().map(|v| v.name).collect();
                 return Err(bad(format!("variants: unknown variant `{v}`: use {}", names.join(", "))));
             }
-        }
-        let mut corruptions = Vec::new();
-        for c in &f.corruptions {
-            let parsed = equiarm_sim::Corruption::parse(c).map_err(|e| bad(format!("corruptions: {e}")))?;
-            corruptions.push(parsed.name());
         }
         for task in f.updates.keys() {
             if !f.tasks.contains(task) {
@@ -221,18 +212,12 @@ impl Grid {
         }
         let overrides = serde_json::to_value(&f.config).map_err(|e| bad(format!("config: {e}")))?;
         let mut cells = Vec::new();
-        for task in &f.tasks {
+        for &task in &f.tasks {
             for variant in &f.variants {
-                for view in &f.views {
-                    for corruption in &corruptions {
+                for &view in &f.views {
+                    for &corruption in corruptions {
                         for &seed in &f.seeds {
-                            cells.push(Cell {
-                                task: task.clone(),
-                                variant: variant.clone(),
-                                view: view.clone(),
-                                corruption: corruption.clone(),
-                                seed,
-                            });
+                            cells.push(Cell { task, variant: variant.clone(), view, corruption, seed });
                         }
                     }
                 }
@@ -298,17 +283,17 @@ impl Grid {
     /// cell's variant, view, corruption, seed and the task's `[updates]`; checked.
     pub fn config(&self, cell: &Cell) -> Result<TrainConfig> {
         let bad = |message: String| ExperimentError::Grid { path: self.path.clone(), message };
-        let base = TrainConfig::preset(self.preset, &cell.task);
+        let base = TrainConfig::preset(self.preset, cell.task);
         let mut value = serde_json::to_value(&base).map_err(|e| bad(e.to_string()))?;
         merge(&mut value, &self.overrides);
         let mut cfg: TrainConfig = serde_json::from_value(value).map_err(|e| bad(format!("config: {e}")))?;
         let variant =
             Variant::by_name(&cell.variant).ok_or_else(|| bad(format!("unknown variant `{}`", cell.variant)))?;
-        cfg.task = cell.task.clone();
+        cfg.task = cell.task;
         cfg.agent.model = variant.model;
         cfg.augmentation = variant.augmentation;
-        cfg.view = cell.view.clone();
-        cfg.corruption = cell.corruption.clone();
+        cfg.view = cell.view;
+        cfg.corruption = cell.corruption;
         cfg.seed = cell.seed;
         if let Some(&u) = self.updates.get(&cell.task) {
             cfg.total_updates = u;
@@ -354,17 +339,17 @@ mod tests {
         .unwrap();
         assert_eq!(g.cells().len(), 8);
         let c = &g.cells()[2];
-        assert_eq!((c.task.as_str(), c.variant.as_str(), c.seed), ("block_pulling", "cnn_drq", 0));
-        assert_eq!(c.corruption, "random_reflection,gripper_only");
+        assert_eq!((c.task, c.variant.as_str(), c.seed), (TaskKind::BlockPulling, "cnn_drq", 0));
+        assert_eq!(c.corruption.to_string(), "random_reflection,gripper_only");
         assert_eq!(c.rel_dir(), PathBuf::from("block_pulling/cnn_drq/side/random_reflection+gripper_only/s0"));
         let cfg = g.config(c).unwrap();
         assert_eq!((cfg.eval_every, cfg.agent.hidden, cfg.seed), (50, 8, 0));
         assert_eq!(cfg.augmentation, Augmentation::Drq { k: 2, m: 2 });
         assert_eq!(cfg.agent.model, ModelKind::Cnn);
-        assert_eq!(cfg.total_updates, TrainConfig::reduced16("block_pulling").total_updates);
+        assert_eq!(cfg.total_updates, TrainConfig::reduced16(TaskKind::BlockPulling).total_updates);
         assert_eq!(g.config(&g.cells()[4]).unwrap().total_updates, 10_000);
         // the rest is the preset's
-        assert_eq!(cfg.batch_size, TrainConfig::reduced16("block_pulling").batch_size);
+        assert_eq!(cfg.batch_size, TrainConfig::reduced16(TaskKind::BlockPulling).batch_size);
         assert_eq!(g.runs, None, "shared runs directory by default");
         assert!(cfg.agent.matmul.is_f32());
         let own = parse(&format!("{BASE}runs = \"runs/own\"\n[config]\nagent = {{ matmul = \"bf16\" }}\n")).unwrap();

@@ -157,7 +157,7 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
     for v in &views {
         let vi = VARIANTS.iter().position(|x| x.name == v.cell.variant).unwrap_or(usize::MAX);
         groups
-            .entry((v.cell.task.clone(), v.cell.view.clone(), v.cell.corruption.clone()))
+            .entry((v.cell.task.to_string(), v.cell.view.to_string(), v.cell.corruption.to_string()))
             .or_default()
             .entry(vi)
             .or_default()
@@ -236,8 +236,8 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
                error over the finished seeds (n).\n\n";
     }
     for ((task, corruption), by_variant) in &swept {
-        let mut cols: Vec<(String, f64)> =
-            by_variant.values().flatten().map(|p| (p.view.clone(), p.elevation_deg)).collect();
+        let mut cols: Vec<(equiarm_types::ViewPreset, f64)> =
+            by_variant.values().flatten().map(|p| (p.view, p.elevation_deg)).collect();
         cols.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
         cols.dedup();
         md += &format!("{task}, corruption {corruption}:\n\n| variant |");
@@ -347,8 +347,8 @@ fn draw(out: &Path, name: &str, mut chart: Chart, metric: &str, series: &[Series
 /// One variant's finished runs at one camera view, for the by-view summary.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ViewPoint {
-    /// The camera preset's name.
-    pub view: String,
+    /// The camera preset.
+    pub view: equiarm_types::ViewPreset,
     /// Its camera elevation, degrees (90 = top-down).
     pub elevation_deg: f64,
     /// Held-out success rate of each finished seed.
@@ -363,17 +363,18 @@ pub struct ViewPoint {
 pub fn by_view(views: &[RunView]) -> BTreeMap<(String, String), BTreeMap<usize, Vec<ViewPoint>>> {
     let mut out: BTreeMap<(String, String), BTreeMap<usize, Vec<ViewPoint>>> = BTreeMap::new();
     for v in views {
-        let (Some(r), Some(preset)) = (&v.result, equiarm_sim::camera::ViewPreset::from_name(&v.cell.view)) else {
+        let Some(r) = &v.result else {
             continue;
         };
         let vi = VARIANTS.iter().position(|x| x.name == v.cell.variant).unwrap_or(usize::MAX);
-        let points = out.entry((v.cell.task.clone(), v.cell.corruption.clone())).or_default().entry(vi).or_default();
+        let points =
+            out.entry((v.cell.task.to_string(), v.cell.corruption.to_string())).or_default().entry(vi).or_default();
         let i = match points.iter().position(|p| p.view == v.cell.view) {
             Some(i) => i,
             None => {
                 points.push(ViewPoint {
-                    view: v.cell.view.clone(),
-                    elevation_deg: preset.config().elevation_deg,
+                    view: v.cell.view,
+                    elevation_deg: equiarm_sim::CameraConfig::from(v.cell.view).elevation_deg,
                     success: Vec::new(),
                     discounted_return: Vec::new(),
                 });
@@ -384,7 +385,7 @@ pub fn by_view(views: &[RunView]) -> BTreeMap<(String, String), BTreeMap<usize, 
         points[i].discounted_return.push(r.heldout.discounted_return);
     }
     out.retain(|_, by_variant| {
-        by_variant.values().flatten().map(|p| p.view.as_str()).collect::<std::collections::BTreeSet<_>>().len() >= 2
+        by_variant.values().flatten().map(|p| p.view).collect::<std::collections::BTreeSet<_>>().len() >= 2
     });
     for by_variant in out.values_mut() {
         for points in by_variant.values_mut() {
@@ -426,17 +427,18 @@ pub fn all_finished(grid: &Grid, runs: &Path, archive: &Archive) -> Result<bool>
 #[cfg(test)]
 mod tests {
     use super::*;
+    use equiarm_types::{Corruption, TaskKind, ViewPreset};
 
     #[test]
     fn archives_keep_runs_of_one_name_with_different_configs_apart() {
         let cell = Cell {
-            task: "block_pulling".into(),
+            task: TaskKind::BlockPulling,
             variant: "equi".into(),
-            view: "side".into(),
-            corruption: "none".into(),
+            view: ViewPreset::Side,
+            corruption: Corruption::NONE,
             seed: 0,
         };
-        let f32_cfg = TrainConfig::reduced16("block_pulling");
+        let f32_cfg = TrainConfig::reduced16(TaskKind::BlockPulling);
         let mut bf16_cfg = f32_cfg.clone();
         bf16_cfg.agent.matmul = serde_json::from_str("\"bf16\"").unwrap();
         let run = |config: &TrainConfig, success_rate: f64| Archived {
@@ -472,10 +474,10 @@ mod tests {
     fn by_view_groups_finished_runs_by_elevation_and_drops_single_view_groups() {
         let run = |task: &str, variant: &str, view: &str, seed: u64, success: Option<f64>| RunView {
             cell: Cell {
-                task: task.into(),
+                task: task.parse().unwrap(),
                 variant: variant.into(),
-                view: view.into(),
-                corruption: "gripper_only".into(),
+                view: view.parse().unwrap(),
+                corruption: "gripper_only".parse().unwrap(),
                 seed,
             },
             evals: Vec::new(),
@@ -508,7 +510,7 @@ mod tests {
         assert_eq!(swept.len(), 1);
         let pulling = &swept[&("block_pulling".to_string(), "gripper_only".to_string())];
         let equi = &pulling[&0];
-        assert_eq!(equi.iter().map(|p| p.view.as_str()).collect::<Vec<_>>(), ["angle90", "angle15"]);
+        assert_eq!(equi.iter().map(|p| p.view.name()).collect::<Vec<_>>(), ["angle90", "angle15"]);
         assert_eq!(equi[0].elevation_deg, 90.0);
         assert_eq!(equi[0].success, [0.9, 0.7]);
         assert_eq!(equi[0].discounted_return, [0.45, 0.35]);

@@ -24,6 +24,7 @@ use crate::plain::{Conv, Linear};
 use crate::repr::{FieldType, Representation};
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
+use equiarm_types::OBS_PLANES;
 use thiserror::Error;
 
 /// Errors building a network.
@@ -57,12 +58,12 @@ pub struct NetConfig {
 impl NetConfig {
     /// Paper settings for the SAC nets: hidden 64, 128 px, 5 channels.
     pub const fn paper() -> Self {
-        NetConfig { hidden: 64, input_size: 128, in_channels: 5 }
+        NetConfig { hidden: 64, input_size: 128, in_channels: OBS_PLANES }
     }
 
     /// Paper settings for SEN fc2: hidden 32, 128 px, 5 channels.
     pub const fn paper_sen() -> Self {
-        NetConfig { hidden: 32, input_size: 128, in_channels: 5 }
+        NetConfig { hidden: 32, input_size: 128, in_channels: OBS_PLANES }
     }
 
     /// Paper settings for the rotation-estimation nets: hidden 64, 128 px, 8 channels.
@@ -72,7 +73,7 @@ impl NetConfig {
 
     /// Reduced CPU config: hidden 16, 64 px, 5 channels (the paper layers from 64×64 on).
     pub const fn reduced_cpu() -> Self {
-        NetConfig { hidden: 16, input_size: 64, in_channels: 5 }
+        NetConfig { hidden: 16, input_size: 64, in_channels: OBS_PLANES }
     }
 
     /// Number of 2×2 pools before the 8×8 map: `input_size = 8·2^p`.

@@ -11,9 +11,10 @@ use equiarm_nn::checkpoint::{CheckpointError, load, load_bytes, parameter_shapes
 use equiarm_nn::diagnostics::equivariance_errors;
 use equiarm_nn::init::Init;
 use equiarm_nn::nets::{Actor, CnnActor, EquiActor, NetConfig};
+use equiarm_types::OBS_PLANES;
 
 fn cfg() -> NetConfig {
-    NetConfig { hidden: 8, input_size: 32, in_channels: 5 }
+    NetConfig { hidden: 8, input_size: 32, in_channels: OBS_PLANES }
 }
 
 fn tmpfile(name: &str) -> std::path::PathBuf {

@@ -8,6 +8,7 @@ use equiarm_nn::burn::module::{Module, Param};
 use equiarm_nn::burn::tensor::{Tensor, TensorData};
 use equiarm_nn::init::Init;
 use equiarm_nn::nets::{Actor, CurlBilinear, FERM_Z_DIM, FermActor, FermCritic, LayerNorm, NetConfig};
+use equiarm_types::OBS_PLANES;
 
 /// With W = 2·I and features one-hot in distinct dimensions, the logits are 2 on the diagonal and 0
 /// elsewhere; with a positive that matches the anchor only for rows 0 and 1 (row 2's positive is row
@@ -62,7 +63,7 @@ fn layer_norm_normalises_each_row() {
 #[test]
 fn the_actor_trains_its_head_not_the_convs() {
     let dev = device().autodiff();
-    let cfg = NetConfig { hidden: 8, input_size: 16, in_channels: 5 };
+    let cfg = NetConfig { hidden: 8, input_size: 16, in_channels: OBS_PLANES };
     let actor = FermActor::new(&cfg, &Init::new(0), &dev).unwrap();
     let x = randn(1, "obs", [2, 5, 16, 16], &dev);
     let (mean, log_std) = actor.forward(x);

@@ -9,11 +9,12 @@ use equiarm_nn::burn::tensor::Tensor;
 use equiarm_nn::diagnostics::{equivariance_errors, lifted};
 use equiarm_nn::init::Init;
 use equiarm_nn::nets::{Actor, Critic, EquiActor, EquiCritic, NetConfig, RotEquiNet, SenActor};
+use equiarm_types::OBS_PLANES;
 
 const TOL: f64 = 1e-4;
 
 fn small() -> NetConfig {
-    NetConfig { hidden: 8, input_size: 128, in_channels: 5 }
+    NetConfig { hidden: 8, input_size: 128, in_channels: OBS_PLANES }
 }
 
 #[test]
@@ -88,7 +89,7 @@ fn c8_rotation_net_is_invariant_under_quarter_turns() {
 #[test]
 fn equi_actor_reduced_input_size_is_equivariant() {
     let dev = device();
-    let cfg = NetConfig { hidden: 8, input_size: 64, in_channels: 5 };
+    let cfg = NetConfig { hidden: 8, input_size: 64, in_channels: OBS_PLANES };
     let actor = EquiActor::new(&cfg, &Init::new(5), &dev).unwrap();
     let errs = equivariance_errors(&actor, vec![randn::<4>(5, "obs", [1, 5, 64, 64], &dev)]);
     for e in errs {
@@ -101,7 +102,7 @@ fn equi_actor_reduced_input_size_is_equivariant() {
 #[test]
 fn sen_actor_is_not_image_equivariant() {
     let dev = device();
-    let cfg = NetConfig { hidden: 8, input_size: 128, in_channels: 5 };
+    let cfg = NetConfig { hidden: 8, input_size: 128, in_channels: OBS_PLANES };
     let actor = SenActor::new(&cfg, &Init::new(6), &dev).unwrap();
     let obs = randn::<4>(6, "obs", [1, 5, 128, 128], &dev);
     let (m, _) = actor.forward(obs.clone());

@@ -201,7 +201,7 @@ fn main() {
         for &model in &models {
             let preset = TrainConfig::preset(
                 equiarm_sac::config::Preset::from_name(preset_name).expect("preset"),
-                "block_pulling",
+                equiarm_types::TaskKind::BlockPulling,
             );
             // SEN's paper hidden size is 32 (docs/paper.md §1.9).
             let hidden = if model == ModelKind::Sen && *preset_name == "paper" { 32 } else { preset.agent.hidden };

@@ -39,6 +39,9 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::optim::{Adam, AdamParams, ScalarAdam, polyak, polyak_by};
+use equiarm_types::ACTION_DIM;
+use equiarm_types::NormalizedAction;
+use equiarm_types::OBS_PLANES;
 
 /// Errors of the agent.
 #[derive(Debug, Error)]
@@ -86,44 +89,7 @@ pub enum AgentError {
     },
 }
 
-/// The network family (docs/paper.md §1.4–1.9), by the name used on the command line, in configs,
-/// in `PolicyWeights.model` and in checkpoint manifests.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ModelKind {
-    /// Equivariant SAC over D4 (`equi_both_d`).
-    Equi,
-    /// The CNN SAC baseline, 'conv' variant.
-    Cnn,
-    /// SEN fc2: CNN encoder, equivariant heads.
-    Sen,
-    /// FERM: CURL's encoder with MLP heads, contrastive pre-training and a contrastive step per
-    /// update (docs/paper.md §1.10).
-    Ferm,
-}
-
-impl ModelKind {
-    /// The name: `equi`, `cnn`, `sen` or `ferm`.
-    pub fn name(self) -> &'static str {
-        match self {
-            ModelKind::Equi => "equi",
-            ModelKind::Cnn => "cnn",
-            ModelKind::Sen => "sen",
-            ModelKind::Ferm => "ferm",
-        }
-    }
-
-    /// Parse a name (`equi`, `equi_d4`, `cnn`, `sen`, `ferm`).
-    pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "equi" | "equi_d4" => Some(ModelKind::Equi),
-            "cnn" => Some(ModelKind::Cnn),
-            "sen" => Some(ModelKind::Sen),
-            "ferm" => Some(ModelKind::Ferm),
-            _ => None,
-        }
-    }
-}
+pub use equiarm_types::ModelKind;
 
 /// How the agent acts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -187,7 +153,7 @@ impl Default for AgentConfig {
             gamma: GAMMA,
             tau: 0.01,
             init_alpha: 1e-2,
-            target_entropy: -5.0,
+            target_entropy: -(ACTION_DIM as f64),
             expert_weight: 1.0,
             use_is_weights: false,
             curl_pretrain_steps: 1600,
@@ -199,7 +165,7 @@ impl Default for AgentConfig {
 impl AgentConfig {
     /// The networks' size configuration.
     pub fn net_config(&self) -> NetConfig {
-        NetConfig { hidden: self.hidden, input_size: self.input_size, in_channels: 5 }
+        NetConfig { hidden: self.hidden, input_size: self.input_size, in_channels: OBS_PLANES }
     }
 }
 
@@ -600,7 +566,7 @@ impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
         n: usize,
         mode: ActMode,
         noise: Option<&[f32]>,
-    ) -> Result<Vec<[f32; 5]>, AgentError> {
+    ) -> Result<Vec<NormalizedAction>, AgentError> {
         let s = self.cfg.input_size;
         if obs.len() != n * 5 * s * s || n == 0 {
             return Err(AgentError::Batch(format!("act: {} values for {n} observations of 5×{s}×{s}", obs.len())));
@@ -965,7 +931,7 @@ impl Agent {
         n: usize,
         mode: ActMode,
         noise: Option<&[f32]>,
-    ) -> Result<Vec<[f32; 5]>, AgentError> {
+    ) -> Result<Vec<NormalizedAction>, AgentError> {
         each!(self, a => a.act(obs, n, mode, noise))
     }
 

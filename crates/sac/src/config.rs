@@ -24,22 +24,8 @@ pub struct ConfigError {
     pub message: String,
 }
 
-/// Image augmentation (docs/paper.md §1.11).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Augmentation {
-    /// RAD: one random crop per transition, shared by obs and next_obs (the paper's default).
-    Rad,
-    /// DrQ with K next-observation crops and M observation crops (paper K = M = 2).
-    Drq {
-        /// Target crops.
-        k: usize,
-        /// Critic/actor crops.
-        m: usize,
-    },
-    /// Centre crop only (the no-crop ablation of docs/paper.md §5.4 keeps the full frame instead).
-    Center,
-}
+pub use equiarm_types::Augmentation;
+use equiarm_types::{Corruption, TaskKind, ViewPreset};
 
 /// Largest frame side accepted (pixels): the replay's frame store refuses larger ones.
 pub const MAX_IMAGE_SIZE: usize = crate::frame::StoredFrame::MAX_SIZE;
@@ -92,14 +78,12 @@ impl Preset {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrainConfig {
-    /// Task: block_pulling, block_pushing, block_picking, drawer_opening, block_in_bowl.
-    pub task: String,
-    /// Camera preset of `equiarm_sim::ViewPreset` (`side` is the paper's oblique view).
-    pub view: String,
-    /// Symmetry corruptions of the observations (docs/paper.md §5): `none` or a comma-separated list
-    /// of `equiarm_sim::env::Corruption` names (random_reflection, occlusion_projection,
-    /// gripper_only); checked by `equiarm_train::config::check`.
-    pub corruption: String,
+    /// The task.
+    pub task: TaskKind,
+    /// Camera preset (`side` is the paper's oblique view).
+    pub view: ViewPreset,
+    /// Symmetry corruptions of the observations (docs/paper.md §5): `none` or a comma-separated set.
+    pub corruption: Corruption,
     /// Rendered frame size in pixels (paper 152); the networks see `agent.input_size` crops.
     pub image_size: usize,
     /// SAC and network settings.
@@ -136,41 +120,31 @@ pub struct TrainConfig {
 
 impl Default for TrainConfig {
     fn default() -> Self {
-        TrainConfig::paper("block_pulling")
-    }
-}
-
-/// The paper's demo count for a task (docs/paper.md §2).
-pub fn paper_demos(task: &str) -> usize {
-    match task {
-        "block_pulling" | "block_pushing" => 20,
-        "block_picking" | "drawer_opening" => 50,
-        "block_in_bowl" => 100,
-        _ => 50,
+        TrainConfig::paper(TaskKind::BlockPulling)
     }
 }
 
 impl TrainConfig {
     /// The paper's settings for `task` (docs/paper.md §2). Meant for a GPU: an update of the
     /// paper-size Equi nets takes tens of seconds on 2 CPU cores.
-    pub fn paper(task: &str) -> Self {
+    pub fn paper(task: TaskKind) -> Self {
         TrainConfig {
-            task: task.to_string(),
-            view: "side".into(),
-            corruption: "none".into(),
+            task,
+            view: ViewPreset::Side,
+            corruption: Corruption::NONE,
             image_size: 152,
             agent: AgentConfig::default(),
             replay: ReplayConfig::default(),
             augmentation: Augmentation::Rad,
             batch_size: 128,
             num_envs: 5,
-            demo_episodes: paper_demos(task),
-            total_updates: if task == "block_in_bowl" { 10_000 } else { 5_000 },
+            demo_episodes: task.paper_demos(),
+            total_updates: task.paper_updates(),
             training_starts: 100,
             eval_every: 200,
             eval_episodes: 100,
             checkpoint_every: 1_000,
-            max_episode_steps: 50,
+            max_episode_steps: task.paper_episode_steps(),
             timeout_terminal: true,
             seed: 0,
         }
@@ -183,7 +157,7 @@ impl TrainConfig {
     /// ~0.64 s on 2 cores (CNN 0.14 s), so block pulling's 1,250 updates fit in ~17 min
     /// (`cargo bench -p equiarm_sac --bench update`). 76 → 64 px costs ~1.5× per update and
     /// hidden 16 ~4×; neither learned faster per update in our screens.
-    pub fn reduced(task: &str) -> Self {
+    pub fn reduced(task: TaskKind) -> Self {
         let paper = TrainConfig::paper(task);
         TrainConfig {
             image_size: 38,
@@ -208,7 +182,7 @@ impl TrainConfig {
     /// 0.23 s at two on the default build (about 50 min of training for a run over DDS on 2 cores). The
     /// default preset ([`Preset::DEFAULT`]), the main job's. Only block pulling has
     /// been run at this preset.
-    pub fn reduced16(task: &str) -> Self {
+    pub fn reduced16(task: TaskKind) -> Self {
         let paper = TrainConfig::paper(task);
         let reduced = TrainConfig::reduced(task);
         TrainConfig {
@@ -219,7 +193,7 @@ impl TrainConfig {
     }
 
     /// A preset for `task`.
-    pub fn preset(preset: Preset, task: &str) -> Self {
+    pub fn preset(preset: Preset, task: TaskKind) -> Self {
         match preset {
             Preset::Paper => TrainConfig::paper(task),
             Preset::Reduced => TrainConfig::reduced(task),
@@ -250,8 +224,7 @@ impl TrainConfig {
         if self.agent.hidden == 0 || !self.agent.hidden.is_multiple_of(8) {
             return err("agent.hidden", format!("{} must be a positive multiple of 8", self.agent.hidden));
         }
-        if self.agent.model == crate::agent::ModelKind::Ferm && self.augmentation != (Augmentation::Drq { k: 1, m: 1 })
-        {
+        if self.agent.model == crate::agent::ModelKind::Ferm && self.augmentation != Augmentation::FERM {
             return err(
                 "augmentation",
                 "FERM crops obs and next_obs independently (docs/paper.md §1.10): use drq with k = m = 1 ({\"drq\": {\"k\": 1, \"m\": 1}})".into(),
@@ -342,7 +315,7 @@ mod tests {
     /// its own JSON and a checkpoint's manifest could refuse to resume the run that wrote it.
     #[test]
     fn configs_read_back_bit_for_bit_from_their_own_json() {
-        let mut c = TrainConfig::reduced("block_pulling");
+        let mut c = TrainConfig::reduced(TaskKind::BlockPulling);
         c.agent.gamma = "0.9184467440737095".parse().unwrap();
         c.agent.expert_weight = "1.1844674407370955e20".parse().unwrap();
         c.replay.priority_eps = "118446744073709.55".parse().unwrap();
@@ -354,17 +327,17 @@ mod tests {
 
     #[test]
     fn presets_validate_and_round_trip() {
-        for task in ["block_pulling", "block_pushing", "block_picking", "drawer_opening", "block_in_bowl"] {
+        for task in TaskKind::ALL {
             for c in [TrainConfig::paper(task), TrainConfig::reduced(task), TrainConfig::reduced16(task)] {
                 c.validate().unwrap();
                 let text = serde_json::to_string(&c).unwrap();
                 assert_eq!(TrainConfig::from_json(&text).unwrap(), c);
             }
         }
-        assert_eq!(TrainConfig::paper("block_in_bowl").demo_episodes, 100);
-        assert_eq!(TrainConfig::paper("block_in_bowl").total_updates, 10_000);
+        assert_eq!(TrainConfig::paper(TaskKind::BlockInBowl).demo_episodes, 100);
+        assert_eq!(TrainConfig::paper(TaskKind::BlockInBowl).total_updates, 10_000);
         // reduced16 differs from reduced in exactly hidden, the learning rate and the update count.
-        let (r, r16) = (TrainConfig::reduced("block_pulling"), TrainConfig::reduced16("block_pulling"));
+        let (r, r16) = (TrainConfig::reduced(TaskKind::BlockPulling), TrainConfig::reduced16(TaskKind::BlockPulling));
         assert_eq!(
             (r16.agent.hidden, r16.agent.lr, r16.agent.lr_final, r16.total_updates),
             (16, 3e-3, Some(3e-4), 7_500)
@@ -378,14 +351,17 @@ mod tests {
         for p in Preset::ALL {
             assert_eq!(Preset::from_name(p.name()), Some(p));
         }
-        assert_eq!(TrainConfig::preset(Preset::DEFAULT, "block_pulling"), TrainConfig::reduced16("block_pulling"));
+        assert_eq!(
+            TrainConfig::preset(Preset::DEFAULT, TaskKind::BlockPulling),
+            TrainConfig::reduced16(TaskKind::BlockPulling)
+        );
     }
 
     #[test]
     fn unknown_keys_and_bad_values_name_the_field() {
         let e = TrainConfig::from_json(r#"{"batch_sise": 3}"#).unwrap_err();
         assert!(e.to_string().contains("batch_sise"), "{e}");
-        let mut c = TrainConfig::reduced("block_pulling");
+        let mut c = TrainConfig::reduced(TaskKind::BlockPulling);
         c.agent.input_size = 60;
         assert_eq!(c.validate().unwrap_err().field, "agent.input_size");
     }
@@ -393,7 +369,7 @@ mod tests {
     #[test]
     fn sizes_above_their_bounds_are_refused_naming_the_field_and_the_bound() {
         type Set = fn(&mut TrainConfig);
-        let base = TrainConfig::paper("block_pulling");
+        let base = TrainConfig::paper(TaskKind::BlockPulling);
         let cases: [(&str, Set); 7] = [
             ("batch_size", |c| c.batch_size = MAX_BATCH + 1),
             ("num_envs", |c| c.num_envs = 1_000_000),

@@ -24,6 +24,7 @@ use crate::config::{Augmentation, TrainConfig};
 use crate::frame::StoredFrame;
 use crate::replay::{Replay, Stored};
 use crate::schedule::{CosineSchedule, LinearSchedule};
+use equiarm_types::NormalizedAction;
 
 /// Version of the checkpoint layout written by this crate.
 pub const CHECKPOINT_FORMAT: u32 = 1;
@@ -173,7 +174,7 @@ impl Learner {
     }
 
     /// Actions for `frames` with a centre crop (acting and evaluation, docs/paper.md §1.1).
-    pub fn act(&mut self, frames: &[&StoredFrame], mode: ActMode) -> Result<Vec<[f32; 5]>, LearnerError> {
+    pub fn act(&mut self, frames: &[&StoredFrame], mode: ActMode) -> Result<Vec<NormalizedAction>, LearnerError> {
         act_on(&mut self.agent, frames, self.cfg.agent.input_size, mode)
     }
 
@@ -378,7 +379,7 @@ pub fn act_on(
     frames: &[&StoredFrame],
     s: usize,
     mode: ActMode,
-) -> Result<Vec<[f32; 5]>, LearnerError> {
+) -> Result<Vec<NormalizedAction>, LearnerError> {
     let x = centre_input(frames, s)?;
     Ok(agent.act(&x, frames.len(), mode, None)?)
 }

@@ -26,6 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::frame::StoredFrame;
 use crate::schedule::LinearSchedule;
+use equiarm_types::NormalizedAction;
 
 /// The largest capacity accepted (2²⁴ slots); keeps a corrupted config from asking for a huge tree.
 pub const MAX_CAPACITY: usize = 1 << 24;
@@ -192,7 +193,7 @@ pub struct Stored {
     /// Observation at time t+1.
     pub next_obs: Arc<StoredFrame>,
     /// Normalised action in [-1, 1], order (p, dx, dy, dz, dθ) (docs/paper.md §1.2).
-    pub action: [f32; 5],
+    pub action: NormalizedAction,
     /// Reward received.
     pub reward: f32,
     /// Terminal for the bootstrap (the caller decides whether timeouts count; the paper's do).

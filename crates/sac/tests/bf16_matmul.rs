@@ -22,7 +22,7 @@ fn losses(model: ModelKind, matmul: MatmulPrecision) -> Vec<[f32; 3]> {
 
 #[test]
 fn bf16_updates_follow_the_f32_ones_or_are_refused_without_amx() {
-    let mut cfg = TrainConfig::reduced16("block_pulling");
+    let mut cfg = TrainConfig::reduced16(equiarm_types::TaskKind::BlockPulling);
     cfg.agent.matmul = MatmulPrecision::Bf16;
     // The config is valid anywhere (a grid of bf16 runs reads and reports on any machine); the
     // machine is checked when an agent is built.

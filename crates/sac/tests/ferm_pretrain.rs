@@ -11,7 +11,7 @@ use equiarm_sac::learner::Learner;
 use equiarm_sac::replay::Stored;
 
 fn cfg() -> TrainConfig {
-    let mut c = TrainConfig::reduced("block_pulling");
+    let mut c = TrainConfig::reduced(equiarm_types::TaskKind::BlockPulling);
     c.agent.model = ModelKind::Ferm;
     c.augmentation = Augmentation::Drq { k: 1, m: 1 };
     c.agent.hidden = 8;

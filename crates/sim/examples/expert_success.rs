@@ -16,8 +16,7 @@ struct Args {
     /// Seeds (episodes) per task.
     #[arg(default_value_t = 100)]
     n: u64,
-    /// Only this task (block_pulling, block_pushing, block_picking, drawer_opening, block_in_bowl;
-    /// `all`: every task, the default).
+    /// Only this task (`all`: every task, the default).
     #[arg(default_value = "all")]
     task: String,
 }

@@ -3,7 +3,7 @@
 //! cargo run --release -p equiarm_sim --example snapshot -- OUT_DIR [task] [seed] [steps] [preset]
 //!
 //! `steps` expert steps are taken before the snapshot (default 0); `preset` is a camera preset name
-//! (side, angle15 … angle90).
+//! (`--help` lists them).
 
 use std::path::PathBuf;
 
@@ -27,13 +27,9 @@ struct Args {
     /// Expert steps taken before the snapshot.
     #[arg(default_value_t = 0)]
     steps: u32,
-    /// Camera preset (side, angle15 … angle90).
-    #[arg(default_value = "side", value_parser = parse_preset)]
+    /// Camera preset.
+    #[arg(value_enum, default_value_t = ViewPreset::Side)]
     preset: ViewPreset,
-}
-
-fn parse_preset(s: &str) -> anyhow::Result<ViewPreset> {
-    ViewPreset::from_name(s).ok_or_else(|| anyhow::anyhow!("unknown camera preset `{s}` (side, angle15 … angle90)"))
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -42,7 +38,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let tasks = TaskKind::select(&args.task)?;
     for task in tasks {
         let mut cfg = EnvConfig::new(task);
-        cfg.camera = preset.config();
+        cfg.camera = preset.into();
         let files = snapshot_task(cfg, seed, steps, &out)?;
         println!("{}: {}", task.name(), files.color.display());
     }

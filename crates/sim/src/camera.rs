@@ -14,72 +14,7 @@ use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaterni
 
 use crate::error::{Result, SimError};
 
-/// Named camera presets: the paper's default oblique view and the view-angle sweep of §5.1.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ViewPreset {
-    /// BulletArm `camera_side`: eye (1, 0, 0.6), target (0.45, 0, 0): elevation ≈ 47.5°, distance ≈ 0.814 m.
-    Side,
-    /// `camera_side_rgbd_{15,30,45,60,75,90}`: eye = (0.45 + 0.81 cos a, 0, 0.81 sin a).
-    Angle15,
-    /// `camera_side_rgbd_30`: elevation 30°, distance 0.81 m.
-    Angle30,
-    /// `camera_side_rgbd_45`: elevation 45°, distance 0.81 m (close to, not the same as, [`ViewPreset::Side`]).
-    Angle45,
-    /// `camera_side_rgbd_60`: elevation 60°, distance 0.81 m.
-    Angle60,
-    /// `camera_side_rgbd_75`: elevation 75°, distance 0.81 m.
-    Angle75,
-    /// `camera_side_rgbd_90`: looking straight down from 0.81 m above the target (top-down view).
-    Angle90,
-}
-
-impl ViewPreset {
-    /// Every preset: [`ViewPreset::Side`], then the view angles from 15° to 90°.
-    pub const ALL: [ViewPreset; 7] = [
-        ViewPreset::Side,
-        ViewPreset::Angle15,
-        ViewPreset::Angle30,
-        ViewPreset::Angle45,
-        ViewPreset::Angle60,
-        ViewPreset::Angle75,
-        ViewPreset::Angle90,
-    ];
-
-    /// The preset's name on the command line and in configs: `side`, `angle15` … `angle90`.
-    pub fn name(self) -> &'static str {
-        match self {
-            ViewPreset::Side => "side",
-            ViewPreset::Angle15 => "angle15",
-            ViewPreset::Angle30 => "angle30",
-            ViewPreset::Angle45 => "angle45",
-            ViewPreset::Angle60 => "angle60",
-            ViewPreset::Angle75 => "angle75",
-            ViewPreset::Angle90 => "angle90",
-        }
-    }
-
-    /// The preset called `name` (as [`ViewPreset::name`] spells it), or `None`.
-    pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|p| p.name() == name)
-    }
-
-    /// The camera configuration of the preset. The angle presets change only the elevation and the
-    /// distance (0.81 m) of [`CameraConfig::default`]: same target, field of view, size and clipping.
-    pub fn config(self) -> CameraConfig {
-        let base = CameraConfig::default();
-        let angle = |deg: f64| CameraConfig { elevation_deg: deg, distance: 0.81, ..base.clone() };
-        match self {
-            ViewPreset::Side => base,
-            ViewPreset::Angle15 => angle(15.0),
-            ViewPreset::Angle30 => angle(30.0),
-            ViewPreset::Angle45 => angle(45.0),
-            ViewPreset::Angle60 => angle(60.0),
-            ViewPreset::Angle75 => angle(75.0),
-            ViewPreset::Angle90 => angle(90.0),
-        }
-    }
-}
+pub use equiarm_types::ViewPreset;
 
 /// Camera configuration. The eye is at `target + distance·(cos e, 0, sin e)`.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -116,6 +51,22 @@ impl Default for CameraConfig {
             height: 152,
             near: 0.1,
             far: 3.0,
+        }
+    }
+}
+
+/// Distance of the angle presets' camera from the target, m (BulletArm's `camera_side_rgbd_N`).
+pub const ANGLE_PRESET_DISTANCE: f64 = 0.81;
+
+impl From<ViewPreset> for CameraConfig {
+    /// The camera configuration of a preset. The angle presets change only the elevation and the
+    /// distance ([`ANGLE_PRESET_DISTANCE`]) of [`CameraConfig::default`]: same target, field of
+    /// view, size and clipping.
+    fn from(view: ViewPreset) -> Self {
+        let base = CameraConfig::default();
+        match view.angle_deg() {
+            None => base,
+            Some(deg) => CameraConfig { elevation_deg: deg, distance: ANGLE_PRESET_DISTANCE, ..base },
         }
     }
 }
@@ -297,7 +248,7 @@ mod tests {
 
     #[test]
     fn unproject_inverts_project_and_extrinsics_agree() {
-        let cam = Camera::new(ViewPreset::Angle30.config()).unwrap();
+        let cam = Camera::new(ViewPreset::Angle30.into()).unwrap();
         let p = Point3::new(0.5, -0.07, 0.03);
         let (u, v, z) = cam.project(p).unwrap();
         assert!((cam.unproject(v, u, z) - p).norm() < 1e-9);
@@ -310,7 +261,7 @@ mod tests {
     fn presets_and_bad_config() {
         for p in ViewPreset::ALL {
             assert_eq!(ViewPreset::from_name(p.name()), Some(p));
-            Camera::new(p.config()).unwrap();
+            Camera::new(p.into()).unwrap();
         }
         let bad = CameraConfig { fov_y_deg: f64::NAN, ..Default::default() };
         assert!(Camera::new(bad).unwrap_err().to_string().contains("fov_y_deg"));

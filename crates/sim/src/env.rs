@@ -23,65 +23,7 @@ use crate::rng::Rng;
 use crate::tasks::{RESET_TCP, TaskKind, TaskState};
 use crate::world::{Scene, SimParams};
 
-/// Symmetry corruptions as config.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct Corruption {
-    /// §5.2: every observation independently mirrored left↔right w.p. 0.5, then up↔down w.p. 0.5.
-    pub random_reflection: bool,
-    /// §5.3: replace the camera image by an orthographic height map (0.6 m square centred on the
-    /// gripper, rows toward +x) built from the camera's depth: value = gripper height − point height,
-    /// missing = −0.1, the finger footprint painted 0, pushing goal +0.02. The colour buffer is zeroed.
-    pub occlusion_projection: bool,
-    /// §5.1 "gripper-only" scene: a plain white floor instead of the checkerboard (the arm is never
-    /// drawn in this simulator, so only the floor changes).
-    pub gripper_only: bool,
-}
-
-impl Corruption {
-    /// The flags' names, in the order [`Corruption::name`] writes them.
-    pub const NAMES: [&'static str; 3] = ["random_reflection", "occlusion_projection", "gripper_only"];
-
-    /// Parses `none` or a comma-separated list of [`Corruption::NAMES`] (the config's and the command
-    /// line's spelling); an unknown or repeated name is an error naming it.
-    pub fn parse(text: &str) -> crate::Result<Self> {
-        let mut c = Corruption::default();
-        let text = text.trim();
-        if text == "none" || text.is_empty() {
-            return Ok(c);
-        }
-        for name in text.split(',').map(str::trim) {
-            let flag = match name {
-                "random_reflection" => &mut c.random_reflection,
-                "occlusion_projection" => &mut c.occlusion_projection,
-                "gripper_only" => &mut c.gripper_only,
-                _ => {
-                    return Err(crate::SimError::Config {
-                        field: "corruption",
-                        message: format!(
-                            "unknown corruption `{name}`: use none or a comma-separated list of {}",
-                            Self::NAMES.join(", ")
-                        ),
-                    });
-                }
-            };
-            if std::mem::replace(flag, true) {
-                return Err(crate::SimError::Config {
-                    field: "corruption",
-                    message: format!("`{name}` is named twice"),
-                });
-            }
-        }
-        Ok(c)
-    }
-
-    /// `none`, or the set flags comma-separated in the order of [`Corruption::NAMES`].
-    pub fn name(&self) -> String {
-        let set = [self.random_reflection, self.occlusion_projection, self.gripper_only];
-        let names: Vec<&str> = Self::NAMES.iter().zip(set).filter(|(_, on)| *on).map(|(n, _)| *n).collect();
-        if names.is_empty() { "none".into() } else { names.join(",") }
-    }
-}
+pub use equiarm_types::Corruption;
 
 /// Largest episode step limit accepted (the paper's is 50).
 pub const MAX_EPISODE_STEPS: u32 = 10_000;
@@ -315,7 +257,7 @@ impl Env {
 
     fn observe(&mut self) -> Observation {
         let frame = if self.config.render { self.render() } else { None };
-        let corruption = self.config.corruption.clone();
+        let corruption = self.config.corruption;
         let (w, h) = (self.camera.width(), self.camera.height());
         let camera = self.camera.clone();
         let ep = self.episode.as_mut().expect("observe is called with an episode");

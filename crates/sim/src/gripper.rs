@@ -24,68 +24,7 @@ use crate::world::Scene;
 pub const TCP_BELOW_PALM: f32 = 0.055;
 /// Workspace box of the TCP (docs/paper.md §3.1): x, y, z ranges in metres.
 pub const WORKSPACE: [[f32; 2]; 3] = [[0.25, 0.65], [-0.2, 0.2], [0.01, 0.25]];
-/// Largest position delta per step, m.
-pub const MAX_DPOS: f32 = 0.05;
-/// Largest yaw delta per step, rad.
-pub const MAX_DROT: f32 = std::f32::consts::FRAC_PI_4;
-
-/// A gripper command in physical units (docs/paper.md §1.2): target open ratio in [0, 1]
-/// (0 closed, 1 open), TCP position deltas in metres, yaw delta in radians.
-#[derive(Clone, Copy, Debug, PartialEq, Default, serde::Serialize, serde::Deserialize)]
-pub struct Action {
-    /// Target jaw opening p: 0 closed, 1 open to the full finger travel; clipped to [0, 1].
-    pub open_ratio: f32,
-    /// TCP displacement along world x, m, clipped to ±[`MAX_DPOS`] (0.05 m).
-    pub dx: f32,
-    /// TCP displacement along world y, m, clipped to ±[`MAX_DPOS`] (0.05 m).
-    pub dy: f32,
-    /// TCP displacement along world z, m, clipped to ±[`MAX_DPOS`] (0.05 m).
-    pub dz: f32,
-    /// Yaw change about world z, rad, clipped to ±[`MAX_DROT`] (π/4).
-    pub dtheta: f32,
-}
-
-impl Action {
-    /// An action from its components, as given (clipping happens in [`Action::clipped`] and when it is applied).
-    pub fn new(open_ratio: f32, dx: f32, dy: f32, dz: f32, dtheta: f32) -> Self {
-        Self { open_ratio, dx, dy, dz, dtheta }
-    }
-
-    /// Components in the order (p, dx, dy, dz, dθ).
-    pub fn to_array(self) -> [f32; 5] {
-        [self.open_ratio, self.dx, self.dy, self.dz, self.dtheta]
-    }
-
-    /// Whether all five components are finite (no NaN or ±inf); [`Env::step`](crate::Env::step) rejects the
-    /// other actions.
-    pub fn is_finite(&self) -> bool {
-        self.to_array().iter().all(|x| x.is_finite())
-    }
-
-    /// Clipped to the action ranges: p ∈ [0, 1], |d| ≤ 0.05, |dθ| ≤ π/4.
-    pub fn clipped(self) -> Self {
-        Self {
-            open_ratio: self.open_ratio.clamp(0.0, 1.0),
-            dx: self.dx.clamp(-MAX_DPOS, MAX_DPOS),
-            dy: self.dy.clamp(-MAX_DPOS, MAX_DPOS),
-            dz: self.dz.clamp(-MAX_DPOS, MAX_DPOS),
-            dtheta: self.dtheta.clamp(-MAX_DROT, MAX_DROT),
-        }
-    }
-
-    /// The agent's normalised action u ∈ [-1, 1]^5 (order p, x, y, z, θ) of this physical action,
-    /// after clipping (docs/paper.md §1.2).
-    pub fn to_normalized(self) -> [f32; 5] {
-        let a = self.clipped();
-        [a.open_ratio * 2.0 - 1.0, a.dx / MAX_DPOS, a.dy / MAX_DPOS, a.dz / MAX_DPOS, a.dtheta / MAX_DROT]
-    }
-
-    /// Decodes a normalised action (values outside [-1, 1] are clipped).
-    pub fn from_normalized(u: [f32; 5]) -> Self {
-        let u = u.map(|x| x.clamp(-1.0, 1.0));
-        Self::new((u[0] + 1.0) / 2.0, u[1] * MAX_DPOS, u[2] * MAX_DPOS, u[3] * MAX_DPOS, u[4] * MAX_DROT)
-    }
-}
+pub use equiarm_types::{ACTION_DIM, Action, MAX_DPOS, MAX_DROT, NormalizedAction};
 
 /// Handles and commanded state of the gripper in one scene.
 #[derive(Clone, Debug)]

@@ -23,64 +23,7 @@ use crate::gripper::{Action, Gripper, MAX_DPOS, MAX_DROT, WORKSPACE};
 use crate::rng::Rng;
 use crate::world::{Scene, yaw_of};
 
-/// The five tasks.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum TaskKind {
-    /// Pull one flat block into the other: success when the two blocks are within 2 mm of each other.
-    BlockPulling,
-    /// Push the cube onto the goal square: success when their centres are closer than 0.05 m in xy.
-    BlockPushing,
-    /// Pick the cube up: success when it is held and the TCP is higher than 0.15 m.
-    BlockPicking,
-    /// Open the drawer: success when it is pulled out of the cabinet by more than 0.15 m.
-    DrawerOpening,
-    /// Put the cube into the bowl: success when the cube touches the bowl within 0.03 m of its centre in xy
-    /// and the bowl is tilted less than 20°.
-    BlockInBowl,
-}
-
-impl TaskKind {
-    /// Every task, in the order of docs/paper.md §3.3.
-    pub const ALL: [TaskKind; 5] = [
-        TaskKind::BlockPulling,
-        TaskKind::BlockPushing,
-        TaskKind::BlockPicking,
-        TaskKind::DrawerOpening,
-        TaskKind::BlockInBowl,
-    ];
-
-    /// Short name (as used on the command line).
-    pub fn name(self) -> &'static str {
-        match self {
-            TaskKind::BlockPulling => "block_pulling",
-            TaskKind::BlockPushing => "block_pushing",
-            TaskKind::BlockPicking => "block_picking",
-            TaskKind::DrawerOpening => "drawer_opening",
-            TaskKind::BlockInBowl => "block_in_bowl",
-        }
-    }
-
-    /// Parses a short name, or BulletArm's `close_loop_<name>`.
-    pub fn from_name(name: &str) -> Option<Self> {
-        let n = name.strip_prefix("close_loop_").unwrap_or(name);
-        Self::ALL.into_iter().find(|t| t.name() == n)
-    }
-
-    /// The tasks a command-line word names: `all` is every task, any other word the one task
-    /// [`TaskKind::from_name`] finds; an unknown word is an error that lists the names.
-    pub fn select(word: &str) -> std::result::Result<Vec<Self>, UnknownTask> {
-        if word == "all" {
-            return Ok(Self::ALL.to_vec());
-        }
-        Self::from_name(word).map(|t| vec![t]).ok_or_else(|| UnknownTask(word.to_string()))
-    }
-}
-
-/// A word that names no task (nor `all`); the message lists the names.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown task `{0}`: use {names} or all", names = TaskKind::ALL.map(|t| t.name()).join(", "))]
-pub struct UnknownTask(pub String);
+pub use equiarm_types::TaskKind;
 
 /// Gripper reset pose (docs/paper.md §3.1): TCP (0.45, 0, 0.20), yaw 0, fully open.
 pub const RESET_TCP: [f32; 3] = [0.45, 0.0, 0.20];

@@ -15,7 +15,7 @@ fn rasteriser_matches_raycast_oracle_for_every_task() {
     for task in TaskKind::ALL {
         for preset in [ViewPreset::Side, ViewPreset::Angle30] {
             let mut cfg = EnvConfig::new(task);
-            cfg.camera = preset.config();
+            cfg.camera = preset.into();
             let mut env = Env::new(cfg).unwrap();
             env.reset(3).unwrap();
             let raster = env.render().unwrap();
@@ -63,7 +63,7 @@ fn world_yaw_90_is_image_rot90_from_top_down() {
     TaskState::spawn(TaskKind::BlockInBowl, &mut scene, &assets, &mut rng).unwrap();
     TaskState::spawn(TaskKind::BlockPulling, &mut scene, &assets, &mut rng).unwrap();
     scene.step();
-    let cam = Camera::new(CameraConfig { elevation_deg: 90.0, distance: 0.9, ..ViewPreset::Angle90.config() }).unwrap();
+    let cam = Camera::new(CameraConfig { elevation_deg: 90.0, distance: 0.9, ..ViewPreset::Angle90.into() }).unwrap();
     let before = render(&scene, &cam);
 
     let centre = Vector::new(0.45, 0.0, 0.0);

@@ -4,7 +4,7 @@
 //! the replay and runs SAC updates on them alone, printing the expert L2 loss, with the config's
 //! expert weight (first argument: a multiplier, default 1).
 //!
-//! `cargo run -p equiarm_sac --example bc_check -- [WEIGHT] [UPDATES] [FRAME:INPUT] [HIDDEN] [MODEL]`
+//! `cargo run -p equiarm_train --example bc_check -- [WEIGHT] [UPDATES] [FRAME:INPUT] [HIDDEN] [MODEL]`
 //!
 //! Environment: `DEMOS=K` demo episodes (default the config's), `VIEW=angle90` another camera
 //! preset (default the paper's oblique `side`), `EVAL_EVERY=U` also runs the greedy
@@ -14,6 +14,7 @@ use clap::Parser;
 use equiarm_sac::agent::ModelKind;
 use equiarm_sac::config::TrainConfig;
 use equiarm_sac::learner::Learner;
+use equiarm_types::NormalizedAction;
 
 /// SAC updates on the expert demos alone: how well the actor imitates them.
 #[derive(Parser, Debug)]
@@ -30,8 +31,8 @@ struct Args {
     sizes: Option<(usize, usize)>,
     /// Hidden size (default the reduced preset's).
     hidden: Option<usize>,
-    /// Network family: equi, cnn, sen or ferm (default the reduced preset's).
-    #[arg(value_parser = parse_model)]
+    /// Network family (default the reduced preset's).
+    #[arg(value_enum)]
     model: Option<ModelKind>,
 }
 
@@ -41,14 +42,10 @@ fn parse_sizes(s: &str) -> anyhow::Result<(usize, usize)> {
     Ok((f.parse().map_err(|_| bad())?, i.parse().map_err(|_| bad())?))
 }
 
-fn parse_model(s: &str) -> anyhow::Result<ModelKind> {
-    ModelKind::parse(s).ok_or_else(|| anyhow::anyhow!("unknown model `{s}` (equi, cnn, sen or ferm)"))
-}
-
 fn main() {
     let args = Args::parse();
     let (w, n) = (args.weight, args.updates);
-    let mut cfg = TrainConfig::reduced("block_pulling");
+    let mut cfg = TrainConfig::reduced(equiarm_types::TaskKind::BlockPulling);
     if let Some((f, i)) = args.sizes {
         cfg.image_size = f;
         cfg.agent.input_size = i;
@@ -64,7 +61,13 @@ fn main() {
         cfg.demo_episodes = k;
     }
     if let Ok(v) = std::env::var("VIEW") {
-        cfg.view = v;
+        match v.parse() {
+            Ok(view) => cfg.view = view,
+            Err(e) => {
+                eprintln!("VIEW: {e}");
+                std::process::exit(2);
+            }
+        }
     }
     let eval_every: u64 = std::env::var("EVAL_EVERY").ok().and_then(|v| v.parse().ok()).unwrap_or(0);
     let mut l = Learner::new(cfg.clone()).unwrap();
@@ -72,7 +75,7 @@ fn main() {
     let (tried, kept) = equiarm_train::env::collect_demos(&mut l, &env_cfg).unwrap();
     println!("demos {kept}/{tried}, transitions {}", l.replay().len());
     let n_t = l.replay().len();
-    let acts: Vec<[f32; 5]> = (0..n_t).filter_map(|i| l.replay().get(i).map(|t| t.action)).collect();
+    let acts: Vec<NormalizedAction> = (0..n_t).filter_map(|i| l.replay().get(i).map(|t| t.action)).collect();
     for d in 0..5 {
         let m = acts.iter().map(|a| a[d] as f64).sum::<f64>() / acts.len() as f64;
         let v = acts.iter().map(|a| (a[d] as f64 - m).powi(2)).sum::<f64>() / acts.len() as f64;
@@ -91,7 +94,7 @@ fn main() {
     // of the greedy action across those observations: a spread near 0 means the actor ignores its
     // input (only biases have learned).
     let greedy = |l: &mut Learner| {
-        let rows: Vec<(std::sync::Arc<equiarm_sac::frame::StoredFrame>, [f32; 5])> =
+        let rows: Vec<(std::sync::Arc<equiarm_sac::frame::StoredFrame>, NormalizedAction)> =
             (0..l.replay().len()).filter_map(|i| l.replay().get(i).map(|t| (t.obs.clone(), t.action))).collect();
         let frames: Vec<&equiarm_sac::frame::StoredFrame> = rows.iter().map(|r| &*r.0).collect();
         let acts = l.act(&frames, equiarm_sac::agent::ActMode::Greedy).unwrap();

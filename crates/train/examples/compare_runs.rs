@@ -1,7 +1,7 @@
 //! Plot the evaluation curves of several runs in one PNG, grouped by label with mean ± standard
 //! error over the runs of a group (the paper's plots), and print a table of the final values.
 //!
-//! `cargo run -p equiarm_sac --example compare_runs -- OUT.png [--metric success_rate|discounted_return]
+//! `cargo run -p equiarm_train --example compare_runs -- OUT.png [--metric success_rate|discounted_return]
 //!   LABEL=RUN_DIR[,RUN_DIR...] ...`
 //!
 //! Each RUN_DIR is a training run directory with `evals.json` (written by `equiarm train`).

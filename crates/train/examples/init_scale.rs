@@ -4,6 +4,7 @@ use equiarm_nn::init::Init;
 use equiarm_nn::layers::{max_pool2, relu};
 use equiarm_nn::nets::{Actor, EquiActor, NetConfig};
 use equiarm_sac::config::TrainConfig;
+use equiarm_types::OBS_PLANES;
 
 fn stats(t: &Tensor<4>) -> (f32, f32) {
     let v = t.clone().into_data().try_into_vec::<f32>().unwrap();
@@ -15,7 +16,7 @@ fn stats(t: &Tensor<4>) -> (f32, f32) {
 
 fn main() {
     let (frame, input, hidden) = (76usize, 64usize, 16usize);
-    let mut cfg = TrainConfig::reduced("block_pulling");
+    let mut cfg = TrainConfig::reduced(equiarm_types::TaskKind::BlockPulling);
     cfg.image_size = frame;
     let mut env = equiarm_sim::Env::new(equiarm_train::env::env_config(&cfg).unwrap()).unwrap();
     let mut frames = Vec::new();
@@ -27,8 +28,8 @@ fn main() {
     let c = equiarm_sac::augment::center_offset(frame, input);
     let x = equiarm_sac::augment::network_input(&refs, &[(c, c); 8], input).unwrap();
     let dev = Device::flex();
-    let mut t = Tensor::<4>::from_data(TensorData::new(x, [8, 5, input, input]), &dev);
-    let net = NetConfig { hidden, input_size: input, in_channels: 5 };
+    let mut t = Tensor::<4>::from_data(TensorData::new(x, [8, OBS_PLANES, input, input]), &dev);
+    let net = NetConfig { hidden, input_size: input, in_channels: OBS_PLANES };
     let actor = EquiActor::new(&net, &Init::new(0), &dev).unwrap();
     println!("input mean/rms {:?}", stats(&t));
     let pools = [true, true, true, false, false, true, false];

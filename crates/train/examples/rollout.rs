@@ -3,7 +3,7 @@
 //! where it was at the episode's end (xy of every body that is neither the table nor the gripper);
 //! each episode's end (success, invalid or timeout) and, last, the counts.
 //!
-//! `cargo run -p equiarm_sac --example rollout -- RUN_DIR [EPISODES]`
+//! `cargo run -p equiarm_train --example rollout -- RUN_DIR [EPISODES]`
 use clap::Parser;
 use equiarm_sac::agent::ActMode;
 use equiarm_sac::config::TrainConfig;

@@ -23,6 +23,7 @@ use equiarm_sac::timing::{UpdateTiming, random_batch, time_update};
 use serde_json::json;
 
 use crate::inprocess::{RunOptions, run};
+use equiarm_types::TaskKind;
 
 /// The network and batch sizes to time.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -51,8 +52,8 @@ pub struct DeviceCheckArgs {
     /// Network and batch sizes.
     #[arg(long, value_enum, default_value_t = Size::Paper)]
     pub size: Size,
-    /// Network families to time, comma-separated (equi, cnn, sen, ferm).
-    #[arg(long, value_delimiter = ',', default_value = "equi,cnn", value_parser = model_kind)]
+    /// Network families to time, comma-separated.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "equi,cnn")]
     pub models: Vec<ModelKind>,
     /// Untimed updates before the timed ones (the first compile the device's kernels).
     #[arg(long, default_value_t = 2)]
@@ -76,8 +77,8 @@ pub struct DeviceCheckArgs {
     #[arg(long, default_value_t = 5.0, value_parser = minutes)]
     pub run_minutes: f64,
     /// The run's task.
-    #[arg(long, default_value = "block_pulling")]
-    pub task: String,
+    #[arg(long, value_enum, default_value_t = TaskKind::BlockPulling)]
+    pub task: TaskKind,
     /// The run evaluates the greedy policy every this many updates.
     #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
     pub eval_every: u64,
@@ -88,10 +89,6 @@ pub struct DeviceCheckArgs {
     /// device_check.json goes.
     #[arg(long, default_value = "runs/device_check")]
     pub run_dir: PathBuf,
-}
-
-fn model_kind(s: &str) -> Result<ModelKind, String> {
-    ModelKind::parse(s.trim()).ok_or_else(|| format!("unknown model `{s}`: choose equi, cnn, sen or ferm"))
 }
 
 fn minutes(s: &str) -> Result<f64, String> {
@@ -119,7 +116,7 @@ pub fn device_check(args: &DeviceCheckArgs) -> anyhow::Result<serde_json::Value>
     let device = equiarm_nn::device::open(&args.device).with_context(|| format!("--device {}", args.device))?;
     let described = equiarm_nn::device::describe(&device);
     println!("device: {} = {described}", args.device);
-    let base = TrainConfig::preset(args.size.preset(), &args.task);
+    let base = TrainConfig::preset(args.size.preset(), args.task);
     crate::config::check(&base).with_context(|| format!("--task {}", args.task))?;
     let (b, s) = (base.batch_size, base.agent.input_size);
     println!(

@@ -11,7 +11,7 @@ use equiarm_sac::config::TrainConfig;
 use equiarm_sac::frame::StoredFrame;
 use equiarm_sac::learner::Learner;
 use equiarm_sac::replay::Stored;
-use equiarm_sim::{Action, Env, EnvConfig, Observation, TaskKind, ViewPreset};
+use equiarm_sim::{Action, CameraConfig, Env, EnvConfig, Observation};
 
 use crate::TrainError;
 use crate::config::check;
@@ -27,16 +27,15 @@ pub fn episode_seed(seed: u64, env: u32, episode: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-/// The env config of a run; the config's task, camera and corruption names are checked ([`check`]).
+/// The env config of a run, after [`check`].
 pub fn env_config(cfg: &TrainConfig) -> Result<EnvConfig, TrainError> {
     check(cfg)?;
-    let task = TaskKind::from_name(&cfg.task).expect("checked");
-    let mut e = EnvConfig::new(task);
-    e.camera = ViewPreset::from_name(&cfg.view).expect("checked").config();
+    let mut e = EnvConfig::new(cfg.task);
+    e.camera = CameraConfig::from(cfg.view);
     e.camera.width = cfg.image_size;
     e.camera.height = cfg.image_size;
     e.max_steps = cfg.max_episode_steps;
-    e.corruption = equiarm_sim::env::Corruption::parse(&cfg.corruption).expect("checked");
+    e.corruption = cfg.corruption;
     Ok(e)
 }
 

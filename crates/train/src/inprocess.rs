@@ -29,6 +29,7 @@ use crate::TrainError;
 use crate::env::{collect_demos, env_config, episode_seed, frame_of, terminal};
 use crate::evaluation::{EvalResult, evaluate};
 use crate::record::{RunRecord, RunSummary};
+use equiarm_types::NormalizedAction;
 
 /// The state file the loop writes beside each checkpoint.
 pub const STATE_FILE: &str = "loop.json";
@@ -38,7 +39,7 @@ struct Slot {
     index: u32,
     episode: u64,
     seed: u64,
-    actions: Vec<[f32; 5]>,
+    actions: Vec<NormalizedAction>,
     obs: Arc<StoredFrame>,
     ret: f64,
     disc: f64,
@@ -49,7 +50,7 @@ struct Slot {
 #[serde(deny_unknown_fields)]
 pub struct LoopState {
     /// Per env: episode index, and the normalised actions taken so far in it (replayed on resume).
-    pub envs: Vec<(u64, Vec<[f32; 5]>)>,
+    pub envs: Vec<(u64, Vec<NormalizedAction>)>,
     /// Env steps so far (training envs).
     pub global_step: u64,
     /// Evaluations so far.

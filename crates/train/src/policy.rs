@@ -282,7 +282,7 @@ impl Policy {
             return WeightsOutcome::Refused(format!("mode {:?} takes no weights", self.mode));
         };
         let ours = agent.config().model.name();
-        if ModelKind::parse(&w.model) != Some(agent.config().model) {
+        if ModelKind::from_name(&w.model) != Some(agent.config().model) {
             return WeightsOutcome::Refused(format!("model '{}' is not this node's '{ours}'", w.model));
         }
         if w.format != "safetensors" {

@@ -23,6 +23,7 @@ use equiarm_nn::nets::{Actor, CnnActor, EquiActor, NetConfig};
 use equiarm_sac::augment::centre_input;
 
 use crate::policy::{action_of, frame_of};
+use equiarm_types::NormalizedAction;
 
 /// Transitions evaluated per forward pass.
 const BATCH: usize = 32;
@@ -31,7 +32,7 @@ const BATCH: usize = 32;
 pub const DIMS: [&str; 5] = ["p", "dx", "dy", "dz", "dtheta"];
 
 /// The recorded action in the agent's normalised units.
-pub fn normalised(c: &GripperCommand) -> [f32; 5] {
+pub fn normalised(c: &GripperCommand) -> NormalizedAction {
     action_of(c).to_normalized()
 }
 
@@ -57,7 +58,7 @@ pub struct Agreement {
     pub corr: [f64; 5],
 }
 
-fn agreement(pairs: &[([f32; 5], [f32; 5])]) -> Agreement {
+fn agreement(pairs: &[(NormalizedAction, NormalizedAction)]) -> Agreement {
     let n = pairs.len();
     let mut a = Agreement { n, ..Default::default() };
     for d in 0..5 {
@@ -88,7 +89,7 @@ pub fn evaluate(bag: &Path, checkpoint: &Path, net: &str, cfg: &NetConfig) -> an
     };
     let s = cfg.input_size;
     let (mut inputs, mut recorded, mut pairs) = (Vec::new(), Vec::new(), Vec::new());
-    let mut run = |inputs: &mut Vec<f32>, recorded: &mut Vec<[f32; 5]>| -> anyhow::Result<()> {
+    let mut run = |inputs: &mut Vec<f32>, recorded: &mut Vec<NormalizedAction>| -> anyhow::Result<()> {
         let b = recorded.len();
         if b == 0 {
             return Ok(());
@@ -106,7 +107,7 @@ pub fn evaluate(bag: &Path, checkpoint: &Path, net: &str, cfg: &NetConfig) -> an
     let reader = Reader::open(bag)?;
     // First the recorded actions by the observation they answered, then those observations' inputs
     // (a re-published observation counts once).
-    let mut actions: HashMap<(String, u64), [f32; 5]> = HashMap::new();
+    let mut actions: HashMap<(String, u64), NormalizedAction> = HashMap::new();
     reader
         .for_each(ReadMode::Salvage, |m| {
             if m.type_name == Transition::TYPE_NAME {

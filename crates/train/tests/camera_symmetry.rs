@@ -15,7 +15,7 @@ use nalgebra::{Matrix2, Point3};
 /// 1 cm move of a point on the table at the workspace centre along world +x and +y: the columns
 /// of the world → image map, linearised there.
 fn plane_map(view: ViewPreset) -> Matrix2<f64> {
-    let cam = Camera::new(view.config()).expect("camera");
+    let cam = Camera::new(view.into()).expect("camera");
     let at = |x: f64, y: f64| {
         let (u, v, _) = cam.project(Point3::new(x, y, 0.0)).expect("table point in front of the camera");
         (u, -v)
@@ -70,7 +70,7 @@ fn rendered_frames_put_blocks_where_the_camera_projects_them() {
     // The maps above come from `Camera::project`, (column, row); the networks see the rendered
     // frame. A block's segmentation centroid must sit where its top face's centre projects.
     let mut cfg = equiarm_sim::EnvConfig::new(equiarm_sim::TaskKind::BlockPulling);
-    cfg.camera = ViewPreset::Angle90.config();
+    cfg.camera = ViewPreset::Angle90.into();
     let mut env = equiarm_sim::Env::new(cfg).expect("env");
     // The largest distance, over the seeds, between the centroid and where a transposed or
     // mirrored frame would put it: the blocks must sit off the image's diagonals and centre lines

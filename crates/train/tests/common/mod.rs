@@ -5,7 +5,7 @@ use equiarm_sac::config::TrainConfig;
 /// A block-pulling run small enough for a test (16 px crops, hidden 8, batch 8, two envs, two demo
 /// episodes), with neither evaluations nor periodic checkpoints: a test turns on what it checks.
 pub fn tiny_run(seed: u64, total_updates: u64) -> TrainConfig {
-    let mut c = TrainConfig::reduced("block_pulling");
+    let mut c = TrainConfig::reduced(equiarm_types::TaskKind::BlockPulling);
     c.image_size = 19;
     c.agent.input_size = 16;
     c.agent.hidden = 8;
