@@ -29,24 +29,17 @@ cargo fmt --all --check
 cargo clippy --locked --workspace --all-targets "${features[@]}" --quiet -- -D warnings
 RUSTDOCFLAGS="-D warnings" cargo doc --locked --workspace "${features[@]}" --no-deps --quiet
 step "build (target dir: $CARGO_TARGET_DIR)"
-# Every test target (examples included) in one go, then the programs (mostly built by then); the
-# benchmarks are linted by clippy above and built when run (docs/benchmarks.md).
-cargo test --locked --workspace "${features[@]}" --no-run
+# Every test target (examples and benchmarks included) in one go, then the programs (mostly built by
+# then). The benchmarks build in the test profile here; `cargo bench` builds them in release.
+cargo test --locked --workspace "${features[@]}" --all-targets --no-run
 "${EQA_BUILD[@]}"
 
-# A private network namespace: as root (CI) or through an unprivileged user namespace.
-ns=()
-if unshare -n true 2>/dev/null; then
-  ns=(unshare -n)
-elif unshare -rn true 2>/dev/null; then
-  ns=(unshare -rn)
-else
-  echo "WARNING: cannot create a network namespace; DDS tests use the host's interfaces" >&2
-fi
-netup='if command -v ip >/dev/null; then ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo 2>/dev/null || true; fi'
+source tests/netns.sh
 
 step "Rust tests (the device tests, crates/train/tests/vulkan_device.rs, on lavapipe: \`vulkan:cpu\`)"
 "${ns[@]}" env VK_ICD_FILENAMES="$EQUIARM_LAVAPIPE_ICD" bash -c "$netup; exec cargo test --locked --offline --workspace ${features[*]}"
+step "benchmarks and examples, short form (tests/bench_smoke.sh)"
+bash tests/bench_smoke.sh
 step "fuzz: 10^4 inputs per target, one target per core (docs/fuzzing.md)"
 "$CARGO_TARGET_DIR/debug/equiarm_fuzz" all --execs 10000
 step "Python tests"

@@ -13,8 +13,20 @@ use std::hint::black_box;
 use std::time::Instant;
 
 const SIDE: u32 = 152;
-const ROUNDS: usize = 15;
-const ITERS: usize = 200;
+
+/// CDR encode + decode of a 152 px RGBD Observation, beside Cyclone DDS Python.
+#[derive(clap::Parser)]
+struct Args {
+    /// Rounds; the median is reported.
+    #[arg(long, default_value_t = 15, value_parser = clap::value_parser!(u64).range(1..=10_000))]
+    rounds: u64,
+    /// Calls per round.
+    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    iters: u64,
+    /// Passed by `cargo bench` to every bench program; ignored.
+    #[arg(long, hide = true)]
+    bench: bool,
+}
 
 fn observation() -> Observation {
     let header = Header::new(Time { sec: 12, nanosec: 345 }, "world");
@@ -33,38 +45,40 @@ fn observation() -> Observation {
     o
 }
 
-/// Median over rounds of MB/s for `ITERS` calls of `f` on `bytes` bytes each.
-fn median_mbps(bytes: usize, mut f: impl FnMut()) -> f64 {
-    for _ in 0..ITERS / 4 {
+/// Median over `rounds` of MB/s for `iters` calls of `f` on `bytes` bytes each.
+fn median_mbps(bytes: usize, (rounds, iters): (usize, usize), mut f: impl FnMut()) -> f64 {
+    for _ in 0..iters / 4 {
         f();
     }
-    let mut rates: Vec<f64> = (0..ROUNDS)
+    let mut rates: Vec<f64> = (0..rounds)
         .map(|_| {
             let t = Instant::now();
-            for _ in 0..ITERS {
+            for _ in 0..iters {
                 f();
             }
-            (bytes * ITERS) as f64 / t.elapsed().as_secs_f64() / 1e6
+            (bytes * iters) as f64 / t.elapsed().as_secs_f64() / 1e6
         })
         .collect();
     rates.sort_by(|a, b| a.total_cmp(b));
-    rates[ROUNDS / 2]
+    rates[rounds / 2]
 }
 
 fn main() {
+    let args = <Args as clap::Parser>::parse();
+    let (rounds, iters) = (args.rounds as usize, args.iters as usize);
     let obs = observation();
     let bytes = cdr::encode(&obs).unwrap();
     let n = bytes.len();
     let mut buf = Vec::with_capacity(n);
-    let enc = median_mbps(n, || {
+    let enc = median_mbps(n, (rounds, iters), || {
         buf.clear();
         cdr::encode_into(black_box(&obs), &mut buf).unwrap();
         black_box(&buf);
     });
-    let dec = median_mbps(n, || {
+    let dec = median_mbps(n, (rounds, iters), || {
         black_box(cdr::decode::<Observation>(black_box(&bytes)).unwrap());
     });
-    println!("CDR of a {SIDE}x{SIDE} RGBD Observation ({n} bytes), median of {ROUNDS} rounds x {ITERS}:");
+    println!("CDR of a {SIDE}x{SIDE} RGBD Observation ({n} bytes), median of {rounds} rounds x {iters}:");
     println!("{:<34} {:>12} {:>12}", "implementation", "encode MB/s", "decode MB/s");
     println!("{:<34} {:>12.0} {:>12.0}", "equiarm_msgs (Rust, cdr-encoding)", enc, dec);
 
@@ -75,7 +89,7 @@ fn main() {
     let path = std::env::temp_dir().join(format!("equiarm_bench_obs_{}.cdr", std::process::id()));
     std::fs::write(&path, &bytes).unwrap();
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/../bench/cdr_peer.py");
-    let out = std::process::Command::new(python).arg(script).arg(&path).arg(ROUNDS.to_string()).output();
+    let out = std::process::Command::new(python).arg(script).arg(&path).arg(rounds.to_string()).output();
     let _ = std::fs::remove_file(&path);
     let out = out.expect("running bench/cdr_peer.py");
     if !out.status.success() {

@@ -88,6 +88,9 @@ struct Args {
     /// Envs of the VecEnv throughput run (block picking, one rayon task per env).
     #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u64).range(1..))]
     envs: u64,
+    /// Steps of the VecEnv throughput run (every env steps this many times).
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
+    vec_steps: u64,
     /// Passed by `cargo bench` to every bench program; ignored.
     #[arg(long, hide = true)]
     bench: bool,
@@ -140,13 +143,31 @@ fn main() {
     let mut venv = VecEnv::new(EnvConfig::new(TaskKind::BlockPicking), n_envs).expect("vec env");
     let seeds: Vec<u64> = (0..n_envs as u64).collect();
     let mut obs = venv.reset(&seeds).expect("reset");
-    let vec_steps = 100;
+    let mut next_seed = n_envs as u64;
+    let vec_steps = args.vec_steps as usize;
+    let mut reset_secs = 0.0;
     let t = Instant::now();
     for _ in 0..vec_steps {
         let actions: Vec<Action> = obs.iter().map(|o| o.expert_action).collect();
-        obs = venv.step(&actions).expect("step").into_iter().map(|r| r.observation).collect();
+        let results = venv.step(&actions).expect("step");
+        // An ended episode is reset (not timed), as every consumer of an env must: stepping on
+        // after the end is refused (SimError::EpisodeOver).
+        let tr = Instant::now();
+        obs = results
+            .into_iter()
+            .zip(venv.envs.iter_mut())
+            .map(|(r, env)| {
+                if r.done {
+                    next_seed += 1;
+                    env.reset(next_seed).expect("reset")
+                } else {
+                    r.observation
+                }
+            })
+            .collect();
+        reset_secs += tr.elapsed().as_secs_f64();
     }
-    let secs = t.elapsed().as_secs_f64();
+    let secs = t.elapsed().as_secs_f64() - reset_secs;
     println!(
         "VecEnv {n_envs} envs x {vec_steps} steps on {} rayon threads: {:.0} env steps/s (single env at the median: {:.0}/s)",
         rayon::current_num_threads(),
