@@ -39,9 +39,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::optim::{Adam, AdamParams, ScalarAdam, polyak, polyak_by};
-use equiarm_types::ACTION_DIM;
-use equiarm_types::NormalizedAction;
-use equiarm_types::OBS_PLANES;
+use equiarm_types::{ACTION_DIM, NormalizedAction, OBS_PLANES};
 
 /// Errors of the agent.
 #[derive(Debug, Error)]

@@ -29,9 +29,6 @@ pub struct Action {
 }
 
 impl Action {
-    /// The components' names, in the order of [`Action::to_array`] and of [`NormalizedAction`].
-    pub const COMPONENTS: [&'static str; ACTION_DIM] = ["p", "dx", "dy", "dz", "dtheta"];
-
     /// An action from its components, as given (clipping happens in [`Action::clipped`] and when it is applied).
     pub fn new(open_ratio: f32, dx: f32, dy: f32, dz: f32, dtheta: f32) -> Self {
         Self { open_ratio, dx, dy, dz, dtheta }

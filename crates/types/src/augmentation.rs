@@ -1,7 +1,5 @@
 //! Image augmentation of the replayed observations (docs/paper.md §1.11).
 
-use std::fmt;
-
 crate::named_enum! {
     /// The augmentation by name, as the command line gives it (`--augmentation`); DrQ's crop counts
     /// then take the paper's values (K = M = 2).
@@ -56,15 +54,6 @@ impl From<AugmentationKind> for Augmentation {
             AugmentationKind::Rad => Augmentation::Rad,
             AugmentationKind::Drq => Augmentation::PAPER_DRQ,
             AugmentationKind::Center => Augmentation::Center,
-        }
-    }
-}
-
-impl fmt::Display for Augmentation {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Augmentation::Drq { k, m } => write!(f, "drq (k = {k}, m = {m})"),
-            other => f.write_str(other.kind().name()),
         }
     }
 }

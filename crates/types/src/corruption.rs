@@ -70,11 +70,6 @@ impl Corruption {
         CorruptionKind::ALL.into_iter().filter(|&k| self.has(k)).collect()
     }
 
-    /// Whether the set is empty.
-    pub fn is_none(&self) -> bool {
-        *self == Corruption::NONE
-    }
-
     /// `none`, or the set's names (for help texts: what [`FromStr`] accepts).
     pub fn help() -> String {
         format!("none, or a comma-separated set of {}", CorruptionKind::names())
