@@ -85,20 +85,20 @@ pub struct Outcome {
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
     /// The target's seeds or harness could not be made.
-    #[error("target {target}: {source}")]
+    #[error("target {target}: {cause}")]
     Setup {
         /// The target.
         target: &'static str,
         /// The cause.
-        source: SetupError,
+        cause: SetupError,
     },
     /// A file of the run could not be made or written.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {cause}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
         /// The cause.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// A worker misbehaved outside any input (died while setting up, or its seeds differ from
     /// the parent's, which would make saved inputs wrong).
@@ -112,7 +112,7 @@ pub enum RunError {
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> RunError + '_ {
-    move |source| RunError::Io { path: path.to_path_buf(), source }
+    move |cause| RunError::Io { path: path.to_path_buf(), cause }
 }
 
 /// FNV-1a over the seeds: the worker's must equal the parent's.
@@ -127,7 +127,7 @@ fn seeds_hash(seeds: &[Vec<u8>]) -> u64 {
 }
 
 fn mutator(target: &Target, scratch: &Path) -> Result<Mutator, RunError> {
-    let seeds = target.seeds(scratch).map_err(|source| RunError::Setup { target: target.name, source })?;
+    let seeds = target.seeds(scratch).map_err(|cause| RunError::Setup { target: target.name, cause })?;
     Ok(Mutator::new(seeds, target.dictionary, target.shape, target.max_len))
 }
 
@@ -157,7 +157,7 @@ impl Progress {
         // both processes access it through the atomics below only.
         let map = unsafe { memmap2::MmapMut::map_mut(&f) }.map_err(io_err(path))?;
         if map.len() < SLOTS * 8 {
-            return Err(RunError::Io { path: path.into(), source: std::io::ErrorKind::UnexpectedEof.into() });
+            return Err(RunError::Io { path: path.into(), cause: std::io::ErrorKind::UnexpectedEof.into() });
         }
         Ok(Progress { map })
     }
@@ -381,8 +381,7 @@ pub fn worker(
     limit_memory(memory_mb).map_err(io_err(Path::new("setrlimit")))?;
     let scratch = tempfile::tempdir().map_err(io_err(Path::new("a temporary directory")))?;
     let mutator = mutator(target, scratch.path())?;
-    let mut harness =
-        target.harness(scratch.path()).map_err(|source| RunError::Setup { target: target.name, source })?;
+    let mut harness = target.harness(scratch.path()).map_err(|cause| RunError::Setup { target: target.name, cause })?;
     let stdout = std::io::stdout();
     let say = |line: String| {
         let mut out = stdout.lock();
@@ -416,8 +415,7 @@ pub fn worker(
 pub fn run_file(target: &Target, input: &Path) -> Result<bool, RunError> {
     let bytes = std::fs::read(input).map_err(io_err(input))?;
     let scratch = tempfile::tempdir().map_err(io_err(Path::new("a temporary directory")))?;
-    let mut harness =
-        target.harness(scratch.path()).map_err(|source| RunError::Setup { target: target.name, source })?;
+    let mut harness = target.harness(scratch.path()).map_err(|cause| RunError::Setup { target: target.name, cause })?;
     Ok(harness.run(&bytes))
 }
 

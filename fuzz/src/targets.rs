@@ -19,12 +19,12 @@ use equiarm_types::OBS_PLANES;
 #[derive(Debug, thiserror::Error)]
 pub enum SetupError {
     /// Reading or writing a scratch file failed.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {cause}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
         /// The cause.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// The project's own code refused to make a seed or the state a harness needs.
     #[error("{what}: {message}")]
@@ -38,7 +38,7 @@ pub enum SetupError {
 
 impl SetupError {
     fn io(path: &Path) -> impl FnOnce(std::io::Error) -> SetupError + '_ {
-        move |source| SetupError::Io { path: path.to_path_buf(), source }
+        move |cause| SetupError::Io { path: path.to_path_buf(), cause }
     }
 
     fn project(what: &'static str) -> impl FnOnce(&dyn std::fmt::Display) -> SetupError {

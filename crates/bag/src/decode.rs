@@ -28,12 +28,12 @@ pub enum DecodeError {
         type_name: &'static str,
     },
     /// The payload does not decode as the type.
-    #[error("'{topic}': {source}")]
+    #[error("'{topic}': {cause}")]
     Cdr {
         /// Topic.
         topic: String,
         /// The CDR error.
-        source: cdr::CdrError,
+        cause: cdr::CdrError,
     },
 }
 
@@ -88,7 +88,7 @@ impl RecordedMessage<'_> {
         {
             return Err(DecodeError::OtherDefinition { topic: self.topic.to_string(), type_name: M::TYPE_NAME });
         }
-        cdr::decode(self.data).map_err(|source| DecodeError::Cdr { topic: self.topic.to_string(), source })
+        cdr::decode(self.data).map_err(|cause| DecodeError::Cdr { topic: self.topic.to_string(), cause })
     }
 }
 

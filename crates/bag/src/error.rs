@@ -6,12 +6,12 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum BagError {
     /// Reading or writing the file system failed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         /// The file or directory being read, written, created or renamed.
         path: PathBuf,
         /// The I/O error.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// rosbag2 never records into an existing directory; neither do we.
     #[error("{path}: already exists and is not empty (a bag is written into a new directory)")]
@@ -48,14 +48,14 @@ pub enum BagError {
         reason: String,
     },
     /// The MCAP structure is damaged.
-    #[error("{path}: damaged MCAP data after {messages} messages: {source}")]
+    #[error("{path}: damaged MCAP data after {messages} messages: {cause}")]
     Mcap {
         /// The damaged MCAP file.
         path: PathBuf,
         /// Messages read from this file before the damage (0 if it could not be opened as a stream).
         messages: u64,
         /// The MCAP reader's error.
-        source: mcap::McapError,
+        cause: mcap::McapError,
     },
     /// A chunk cannot be read (bad CRC, compression or records) and the read was strict.
     #[error("{path}: a chunk{} is damaged ({reason}); `equiarm bag recover` keeps every intact chunk", offset.map(|o| format!(" at byte {o}")).unwrap_or_default())]
@@ -68,12 +68,12 @@ pub enum BagError {
         reason: String,
     },
     /// Writing MCAP records failed.
-    #[error("{path}: writing MCAP: {source}")]
+    #[error("{path}: writing MCAP: {cause}")]
     Write {
         /// The MCAP file being written.
         path: PathBuf,
         /// The MCAP writer's error.
-        source: mcap::McapError,
+        cause: mcap::McapError,
     },
     /// A message refers to a topic id this writer never handed out, or similar misuse.
     #[error("{path}: {what}")]
@@ -88,11 +88,11 @@ pub enum BagError {
 impl BagError {
     pub(crate) fn io(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> BagError {
         let path = path.into();
-        move |source| BagError::Io { path, source }
+        move |cause| BagError::Io { path, cause }
     }
 
     pub(crate) fn write(path: impl Into<PathBuf>) -> impl FnOnce(mcap::McapError) -> BagError {
         let path = path.into();
-        move |source| BagError::Write { path, source }
+        move |cause| BagError::Write { path, cause }
     }
 }

@@ -418,7 +418,7 @@ fn read_linear<E>(
 ) -> Result<Result<(), E>, BagError> {
     let mut first_chunk = true;
     let reader = mcap::read::LinearReader::new_with_options(map, mcap::read::Options::IgnoreEndMagic.into())
-        .map_err(|source| BagError::Mcap { path: path.into(), messages: 0, source })?;
+        .map_err(|cause| BagError::Mcap { path: path.into(), messages: 0, cause })?;
     let mut channels = mcap::read::ChannelAccumulator::<'static>::default();
     let (mut in_file, mut ended) = (0u64, None::<String>);
     'records: for r in reader {

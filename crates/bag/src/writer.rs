@@ -335,7 +335,7 @@ impl Writer {
             f.mcap.finish().map_err(BagError::write(&f.path))?;
             let mut buf = f.mcap.into_inner();
             buf.flush().map_err(BagError::io(&f.path))?;
-            let file = buf.into_inner().map_err(|e| BagError::Io { path: f.path.clone(), source: e.into_error() })?;
+            let file = buf.into_inner().map_err(|e| BagError::Io { path: f.path.clone(), cause: e.into_error() })?;
             file.sync_all().map_err(BagError::io(&f.path))?;
         }
         Ok(())

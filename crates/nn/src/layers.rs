@@ -26,12 +26,12 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum LayerError {
     /// The kernel basis could not be built.
-    #[error("layer {path}: {source}")]
+    #[error("layer {path}: {cause}")]
     Basis {
         /// Parameter path of the layer.
         path: String,
         /// Cause.
-        source: BasisError,
+        cause: BasisError,
     },
     /// Input and output field types belong to different groups.
     #[error("layer {path}: input type {input} and output type {output} have different groups")]
@@ -163,7 +163,7 @@ impl EquivariantConv {
             let mut solved = Vec::new();
             for ri in &in_runs {
                 let b = kernel_basis(&ri.rep, &ro.rep, kernel_size)
-                    .map_err(|source| LayerError::Basis { path: path.into(), source })?;
+                    .map_err(|cause| LayerError::Basis { path: path.into(), cause })?;
                 row.push(Block {
                     out_fields: ro.count,
                     in_fields: ri.count,

@@ -45,12 +45,12 @@ use equiarm_types::{ACTION_DIM, NormalizedAction, OBS_PLANES};
 #[derive(Debug, Error)]
 pub enum AgentError {
     /// A network could not be built.
-    #[error("building the {model} networks: {source}")]
+    #[error("building the {model} networks: {cause}")]
     Net {
         /// Model name.
         model: &'static str,
         /// Cause.
-        source: equiarm_nn::nets::NetError,
+        cause: equiarm_nn::nets::NetError,
     },
     /// A batch has inconsistent sizes.
     #[error("bad batch: {0}")]
@@ -423,8 +423,8 @@ impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
         let net = cfg.net_config();
         let init = Init::new(seed);
         let model = cfg.model.name();
-        let actor = actor(&net, &init, &device).map_err(|source| AgentError::Net { model, source })?;
-        let critic = critic(&net, &init, &device).map_err(|source| AgentError::Net { model, source })?;
+        let actor = actor(&net, &init, &device).map_err(|cause| AgentError::Net { model, cause })?;
+        let critic = critic(&net, &init, &device).map_err(|cause| AgentError::Net { model, cause })?;
         let target = critic.valid();
         let actor = actor.tie(&critic);
         let adam = AdamParams::new(cfg.lr);

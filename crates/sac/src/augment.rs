@@ -34,12 +34,12 @@ pub enum AugmentError {
         out: usize,
     },
     /// Decoding one frame failed (for example an offset outside the frame).
-    #[error("frame {index}: {source}")]
+    #[error("frame {index}: {cause}")]
     Frame {
         /// Index of the frame in the batch.
         index: usize,
         /// What went wrong.
-        source: FrameError,
+        cause: FrameError,
     },
 }
 
@@ -104,7 +104,7 @@ pub fn network_input_into(
     dst.resize(frames.len() * per, 0.0);
     for (index, ((frame, &(row0, col0)), dst)) in frames.iter().zip(offsets).zip(dst.chunks_exact_mut(per)).enumerate()
     {
-        frame.write_planes(row0, col0, out, dst).map_err(|source| AugmentError::Frame { index, source })?;
+        frame.write_planes(row0, col0, out, dst).map_err(|cause| AugmentError::Frame { index, cause })?;
     }
     Ok(())
 }
@@ -197,7 +197,7 @@ mod tests {
         );
         assert!(matches!(
             network_input(&[&a, &a], &[(0, 0), (0, 9)], 4),
-            Err(AugmentError::Frame { index: 1, source: FrameError::Window { .. } })
+            Err(AugmentError::Frame { index: 1, cause: FrameError::Window { .. } })
         ));
         assert!(network_input(&[], &[], 4).unwrap().is_empty());
     }

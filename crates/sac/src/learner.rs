@@ -401,35 +401,35 @@ pub fn read_manifest(dir: &Path) -> Result<Manifest, LearnerError> {
 #[derive(Debug, Error)]
 pub enum JsonFileError {
     /// Reading, writing or renaming the file failed.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {cause}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
         /// The cause.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// The file's text is not the JSON expected (or the value cannot be serialised).
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {cause}", path.display())]
     Json {
         /// The file.
         path: PathBuf,
         /// The cause.
-        source: serde_json::Error,
+        cause: serde_json::Error,
     },
 }
 
 /// Serialise `v` to `path` as pretty JSON through a temporary file.
 pub fn write_json<T: Serialize>(path: &Path, v: &T) -> Result<(), JsonFileError> {
-    let text = serde_json::to_string_pretty(v).map_err(|source| JsonFileError::Json { path: path.into(), source })?;
+    let text = serde_json::to_string_pretty(v).map_err(|cause| JsonFileError::Json { path: path.into(), cause })?;
     let tmp = path.with_extension("json.tmp");
-    std::fs::write(&tmp, text).map_err(|source| JsonFileError::Io { path: tmp.clone(), source })?;
-    std::fs::rename(&tmp, path).map_err(|source| JsonFileError::Io { path: path.into(), source })
+    std::fs::write(&tmp, text).map_err(|cause| JsonFileError::Io { path: tmp.clone(), cause })?;
+    std::fs::rename(&tmp, path).map_err(|cause| JsonFileError::Io { path: path.into(), cause })
 }
 
 /// Read JSON from `path`, errors naming the file.
 pub fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, JsonFileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| JsonFileError::Io { path: path.into(), source })?;
-    serde_json::from_str(&text).map_err(|source| JsonFileError::Json { path: path.into(), source })
+    let text = std::fs::read_to_string(path).map_err(|cause| JsonFileError::Io { path: path.into(), cause })?;
+    serde_json::from_str(&text).map_err(|cause| JsonFileError::Json { path: path.into(), cause })
 }
 
 /// The dotted path of the first field in which two JSON values (configs) differ, below `prefix`.

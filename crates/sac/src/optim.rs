@@ -19,12 +19,12 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum OptimError {
     /// Reading or writing the file failed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         /// File.
         path: PathBuf,
         /// Cause.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// The file is not a valid state file for this network.
     #[error("{path}: {message}")]
@@ -121,7 +121,7 @@ impl Adam {
             tensors.push((format!("{name}.v"), shape.clone(), to_vec(v.clone())));
         }
         let meta = [("step".to_string(), self.step.to_string()), ("lr".to_string(), self.params.lr.to_string())];
-        crate::tensorfile::write(path, &tensors, &meta).map_err(|source| OptimError::Io { path: path.into(), source })
+        crate::tensorfile::write(path, &tensors, &meta).map_err(|cause| OptimError::Io { path: path.into(), cause })
     }
 
     /// Load state saved by [`Adam::save`] for `module` (every moment must name one of its
@@ -130,7 +130,7 @@ impl Adam {
     pub fn load<M: Module>(params: AdamParams, module: &M, path: &Path, device: &Device) -> Result<Self, OptimError> {
         let fmt = |message: String| OptimError::Format { path: path.into(), message };
         let file = crate::tensorfile::read(path).map_err(|e| match e {
-            crate::tensorfile::ReadError::Io(source) => OptimError::Io { path: path.into(), source },
+            crate::tensorfile::ReadError::Io(source) => OptimError::Io { path: path.into(), cause: source },
             crate::tensorfile::ReadError::Format(m) => fmt(m),
         })?;
         let step: u64 = file

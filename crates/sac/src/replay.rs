@@ -98,14 +98,14 @@ pub enum ReplayError {
         td: f32,
     },
     /// Reading or writing a checkpoint file failed at the OS level.
-    #[error("{op} {}: {source}", path.display())]
+    #[error("{op} {}: {cause}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
         /// What was being done (`"creating"`, `"opening"`, ...).
         op: &'static str,
         /// The OS error.
-        source: io::Error,
+        cause: io::Error,
     },
     /// A checkpoint file is not a replay checkpoint, is of another version, or is truncated or corrupt.
     #[error("replay checkpoint {}: {reason}", path.display())]
@@ -479,7 +479,7 @@ impl Replay {
         let mut tmp = path.as_os_str().to_owned();
         tmp.push(".tmp");
         let tmp = PathBuf::from(tmp);
-        let io_err = |op, source| ReplayError::Io { path: tmp.clone(), op, source };
+        let io_err = |op, source| ReplayError::Io { path: tmp.clone(), op, cause: source };
         let file = File::create(&tmp).map_err(|e| io_err("creating", e))?;
         let result = self.write_to(file);
         let file = match result {
@@ -497,10 +497,10 @@ impl Replay {
         std::fs::rename(&tmp, path).map_err(|source| ReplayError::Io {
             path: path.to_owned(),
             op: "renaming to",
-            source,
+            cause: source,
         })?;
         let bytes = std::fs::metadata(path)
-            .map_err(|source| ReplayError::Io { path: path.to_owned(), op: "reading metadata of", source })?
+            .map_err(|cause| ReplayError::Io { path: path.to_owned(), op: "reading metadata of", cause })?
             .len();
         Ok(bytes)
     }
@@ -572,8 +572,7 @@ impl Replay {
     /// Errors name the file and what was wrong: wrong magic, unsupported version, truncation,
     /// checksum or decompression failure, or a value out of range.
     pub fn load(path: &Path) -> Result<Replay, ReplayError> {
-        let file =
-            File::open(path).map_err(|source| ReplayError::Io { path: path.to_owned(), op: "opening", source })?;
+        let file = File::open(path).map_err(|cause| ReplayError::Io { path: path.to_owned(), op: "opening", cause })?;
         let mut r = BufReader::with_capacity(1 << 20, file);
         let fmt = |reason: Corrupt| ReplayError::Format { path: path.to_owned(), reason: reason.0 };
         let mut head = [0u8; 12];

@@ -151,7 +151,7 @@ impl Assets {
 
 /// Reads and parses one URDF file.
 pub fn load_urdf(path: &Path) -> Result<Asset> {
-    let text = std::fs::read_to_string(path).map_err(|source| SimError::Read { file: path.to_path_buf(), source })?;
+    let text = std::fs::read_to_string(path).map_err(|cause| SimError::Read { file: path.to_path_buf(), cause })?;
     parse_urdf(&path.display().to_string(), &text)
 }
 

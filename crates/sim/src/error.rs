@@ -7,13 +7,12 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum SimError {
     /// A URDF (or other asset) file could not be read.
-    #[error("reading {file}: {source}")]
+    #[error("reading {file}: {cause}")]
     Read {
         /// Path of the file that could not be read.
         file: PathBuf,
         /// The I/O error (not found, permission denied, not UTF-8...).
-        #[source]
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// The XML of a URDF file did not parse into the URDF data model (bad number, unknown joint type,
     /// missing attribute...). `message` is the parser's, which names the element.

@@ -59,10 +59,10 @@ pub enum TrainError {
     Learner(#[from] equiarm_sac::learner::LearnerError),
     /// The simulator failed.
     #[error("simulator: {0}")]
-    Sim(#[from] equiarm_sim::SimError),
+    Sim(equiarm_sim::SimError),
     /// A frame could not be stored.
     #[error("frame: {0}")]
-    Frame(#[from] equiarm_sac::frame::FrameError),
+    Frame(equiarm_sac::frame::FrameError),
     /// The simulator rendered a frame that is not square.
     #[error("frame is {width}×{height}, must be square")]
     NotSquare {
@@ -89,6 +89,20 @@ pub enum TrainError {
         /// Needed.
         want: usize,
     },
+}
+
+// By hand, not `#[from]`: these messages show their cause, so it is not also chained as a source
+// (docs/conventions.md, "Errors").
+impl From<equiarm_sim::SimError> for TrainError {
+    fn from(e: equiarm_sim::SimError) -> Self {
+        TrainError::Sim(e)
+    }
+}
+
+impl From<equiarm_sac::frame::FrameError> for TrainError {
+    fn from(e: equiarm_sac::frame::FrameError) -> Self {
+        TrainError::Frame(e)
+    }
 }
 
 impl TrainError {

@@ -36,12 +36,12 @@ pub const CSV_HEADER: &str = "global_step,wall_time,name,value";
 #[derive(Debug, thiserror::Error)]
 pub enum MetricsError {
     /// Reading, writing, creating or renaming a file or directory failed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         /// The file or directory involved.
         path: PathBuf,
         /// The underlying error.
-        source: io::Error,
+        cause: io::Error,
     },
     /// A line of a metrics file could not be parsed.
     #[error("{path}:{line}: {reason}")]
@@ -70,7 +70,7 @@ pub enum MetricsError {
 }
 
 fn io_err(path: &Path) -> impl FnOnce(io::Error) -> MetricsError + '_ {
-    move |source| MetricsError::Io { path: path.to_path_buf(), source }
+    move |cause| MetricsError::Io { path: path.to_path_buf(), cause }
 }
 
 /// Appends scalar records to `metrics.jsonl` and `metrics.csv` in a run directory.
@@ -224,7 +224,7 @@ fn read_optional(path: &Path) -> Result<Option<String>, MetricsError> {
     match std::fs::read_to_string(path) {
         Ok(t) => Ok(Some(t)),
         Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(None),
-        Err(e) => Err(MetricsError::Io { path: path.to_path_buf(), source: e }),
+        Err(e) => Err(MetricsError::Io { path: path.to_path_buf(), cause: e }),
     }
 }
 

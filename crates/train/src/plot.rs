@@ -38,20 +38,20 @@ pub enum PlotError {
         dir: PathBuf,
     },
     /// Creating or writing the output file failed.
-    #[error("cannot write {path}: {source}")]
+    #[error("cannot write {path}: {cause}")]
     Io {
         /// The output file.
         path: PathBuf,
         /// The underlying error.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// PNG encoding failed.
-    #[error("cannot encode {path} as PNG: {source}")]
+    #[error("cannot encode {path} as PNG: {cause}")]
     Encode {
         /// The output file.
         path: PathBuf,
         /// The underlying error.
-        source: image::ImageError,
+        cause: image::ImageError,
     },
     /// plotters failed to lay out or draw the chart (e.g. the embedded font could not be loaded).
     #[error("cannot draw the chart: {0}")]
@@ -637,14 +637,13 @@ pub fn write_png(path: &Path, chart: &Chart, series: &[Series]) -> Result<(), Pl
         return Err(PlotError::MissingDirectory { path: path.to_path_buf(), dir: dir.to_path_buf() });
     }
     let img = render(chart, series)?;
-    let file = File::create(path).map_err(|source| PlotError::Io { path: path.to_path_buf(), source })?;
+    let file = File::create(path).map_err(|cause| PlotError::Io { path: path.to_path_buf(), cause })?;
     let mut out = BufWriter::new(file);
-    img.write_to(&mut out, ImageFormat::Png)
-        .map_err(|source| PlotError::Encode { path: path.to_path_buf(), source })?;
+    img.write_to(&mut out, ImageFormat::Png).map_err(|cause| PlotError::Encode { path: path.to_path_buf(), cause })?;
     out.into_inner()
-        .map_err(|e| PlotError::Io { path: path.to_path_buf(), source: e.into_error() })?
+        .map_err(|e| PlotError::Io { path: path.to_path_buf(), cause: e.into_error() })?
         .sync_all()
-        .map_err(|source| PlotError::Io { path: path.to_path_buf(), source })
+        .map_err(|cause| PlotError::Io { path: path.to_path_buf(), cause })
 }
 
 #[cfg(test)]

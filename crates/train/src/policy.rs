@@ -65,7 +65,15 @@ pub enum AnswerError {
     Frame(#[from] BadFrame),
     /// The actor failed on it.
     #[error("acting: {0}")]
-    Act(#[from] equiarm_sac::learner::LearnerError),
+    Act(equiarm_sac::learner::LearnerError),
+}
+
+// By hand, not `#[from]`: the message shows the cause, so it is not also chained as a source
+// (docs/conventions.md, "Errors").
+impl From<equiarm_sac::learner::LearnerError> for AnswerError {
+    fn from(e: equiarm_sac::learner::LearnerError) -> Self {
+        AnswerError::Act(e)
+    }
 }
 
 /// The physical action a GripperCommand (or a Transition's action) carries.

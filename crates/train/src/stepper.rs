@@ -26,16 +26,24 @@ pub const CAMERA_FRAME: &str = "camera_optical_frame";
 #[derive(Debug, thiserror::Error)]
 pub enum StepError {
     /// The simulator failed (resetting or stepping).
-    #[error("{what}: {source}")]
+    #[error("{what}: {cause}")]
     Sim {
         /// What was being done.
         what: String,
         /// The simulator's error.
-        source: SimError,
+        cause: SimError,
     },
     /// The camera frame did not fit its message.
     #[error("the camera frame: {0}")]
-    Frame(#[from] equiarm_msgs::ObsFrameError),
+    Frame(equiarm_msgs::ObsFrameError),
+}
+
+// By hand, not `#[from]`: the message shows the cause, so it is not also chained as a source
+// (docs/conventions.md, "Errors").
+impl From<equiarm_msgs::ObsFrameError> for StepError {
+    fn from(e: equiarm_msgs::ObsFrameError) -> Self {
+        StepError::Frame(e)
+    }
 }
 
 /// Simulated time: `ticks * step_ns` nanoseconds.
@@ -157,10 +165,10 @@ impl Stepper {
         self.next_episode += 1;
         self.seed = self.seeds.next_u64();
         let task = self.env.config().task.name();
-        let first = self
-            .env
-            .reset(self.seed)
-            .map_err(|source| StepError::Sim { what: format!("resetting {task} with seed {}", self.seed), source })?;
+        let first = self.env.reset(self.seed).map_err(|source| StepError::Sim {
+            what: format!("resetting {task} with seed {}", self.seed),
+            cause: source,
+        })?;
         let obs = observation(first, self.seq, &self.name, self.episode, self.clock.tick())?;
         (self.ret, self.disc, self.discount, self.all_expert) = (0.0, 0.0, 1.0, true);
         Ok(self.obs.insert(obs))
@@ -192,7 +200,7 @@ impl Stepper {
                 self.reject(&cmd, &reason.to_string());
                 return Ok(None);
             }
-            Err(source) => return Err(StepError::Sim { what: "stepping the env".into(), source }),
+            Err(source) => return Err(StepError::Sim { what: "stepping the env".into(), cause: source }),
         };
         let obs = self.obs.take().expect("checked");
         self.stats.steps += 1;
