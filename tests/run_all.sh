@@ -46,4 +46,15 @@ step "Python tests"
 # The launch-script examples drive real nodes over DDS: same private namespace, our binary.
 export EQUIARM_BIN="$CARGO_TARGET_DIR/debug/equiarm"
 "${ns[@]}" bash -c "$netup; cd tests/python && exec \"\$EQUIARM_PYTHON\" -m pytest -q"
+step "the Python package (python/): its wheel, built by maturin, and its tests"
+# The test build's profile and features, so the wheel reuses the build above (python/Cargo.toml,
+# "Build reuse"); `pip install ./python` builds the same package in release.
+wheels=$(mktemp -d)
+"$EQUIARM_PYTHON" -m maturin build --locked --profile dev "${features[@]}" -m python/Cargo.toml \
+  --compatibility linux -i "$EQUIARM_PYTHON" -o "$wheels" --quiet
+"$EQUIARM_PYTHON" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps "$wheels"/equiarm-*.whl
+rm -rf "$wheels"
+"${ns[@]}" bash -c "$netup; cd python/tests && exec \"\$EQUIARM_PYTHON\" -m pytest -q"
+# Its benchmark in short form, without the PyBullet peer (bash bench/python.sh runs it in full).
+(cd python/tests && "$EQUIARM_PYTHON" ../../bench/python_env.py --steps 5 --rounds 1 --tasks block_pulling > /dev/null)
 step "all tests passed"
