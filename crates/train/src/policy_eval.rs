@@ -58,6 +58,30 @@ pub struct Agreement {
     pub corr: [f64; 5],
 }
 
+impl Agreement {
+    /// The agreement as a text table (one row per action dimension).
+    pub fn table(&self) -> String {
+        let mut out = format!("{} transitions; policy (tanh of mean) vs recorded action, normalised units\n", self.n);
+        out += &format!("{:<8} {:>10} {:>14} {:>12}\n", "dim", "mean |d|", "same sign", "correlation");
+        for (d, name) in DIMS.iter().enumerate() {
+            out += &format!("{name:<8} {:>10.4} {:>14.3} {:>12.3}\n", self.mae[d], self.sign[d], self.corr[d]);
+        }
+        out
+    }
+
+    /// The agreement as JSON: `{"transitions", "dims": [{"dim", "mae", "sign_agreement", "correlation"}]}`.
+    pub fn json(&self) -> serde_json::Value {
+        let dims: Vec<_> = DIMS
+            .iter()
+            .enumerate()
+            .map(|(d, name)| {
+                serde_json::json!({"dim": name, "mae": self.mae[d], "sign_agreement": self.sign[d], "correlation": self.corr[d]})
+            })
+            .collect();
+        serde_json::json!({"transitions": self.n, "dims": dims})
+    }
+}
+
 fn agreement(pairs: &[(NormalizedAction, NormalizedAction)]) -> Agreement {
     let n = pairs.len();
     let mut a = Agreement { n, ..Default::default() };
@@ -173,5 +197,21 @@ mod tests {
         assert_eq!(a.mae, [0.0; 5]);
         assert_eq!(a.sign, [1.0; 5]);
         assert!(a.corr.iter().all(|c| (c - 1.0).abs() < 1e-12));
+    }
+
+    #[test]
+    fn the_table_and_the_json_show_every_dimension() {
+        let a = agreement(&[([0.5, -0.2, 0.1, 0.3, -0.9], [0.4, -0.2, 0.1, 0.3, -0.9]), ([0.1; 5], [0.0; 5])]);
+        let table = a.table();
+        let lines: Vec<&str> = table.lines().collect();
+        assert!(lines[0].starts_with("2 transitions"));
+        assert_eq!(lines.len(), 2 + DIMS.len());
+        for (line, dim) in lines[2..].iter().zip(DIMS) {
+            assert!(line.starts_with(dim), "{line}");
+        }
+        let json = a.json();
+        assert_eq!(json["transitions"], 2);
+        assert_eq!(json["dims"][0]["dim"], "p");
+        assert!((json["dims"][0]["mae"].as_f64().unwrap() - 0.1).abs() < 1e-6);
     }
 }
