@@ -86,9 +86,9 @@ class EquiArmEnv(gymnasium.Env):
             seed=seed,
             units="normalized",
         )
-        self.task = self._sim.task
+        self.task = self._sim.facts["task"]
         self.render_mode = render_mode
-        self.observation_space = observation_space(self._sim.image_size, self._sim.far)
+        self.observation_space = observation_space(self._sim.facts["image_size"], self._sim.facts["far"])
         self.action_space = action_space()
         self._frame = None
 
@@ -123,7 +123,7 @@ class EquiArmEnv(gymnasium.Env):
     @property
     def max_steps(self) -> int:
         """The episode step limit."""
-        return self._sim.max_steps
+        return self._sim.facts["max_steps"]
 
 
 def _numpy_seed(info: dict) -> dict:

@@ -46,11 +46,11 @@ class EquiArmVectorEnv(VectorEnv):
             units="normalized",
         )
         self.num_envs = num_envs
-        self.task = self._sim.task
+        self.task = self._sim.facts["task"]
         self.render_mode = render_mode
-        self.single_observation_space = observation_space(self._sim.image_size, self._sim.far)
+        self.single_observation_space = observation_space(self._sim.facts["image_size"], self._sim.facts["far"])
         self.single_action_space = action_space()
-        self.observation_space = observation_space(self._sim.image_size, self._sim.far, batch=num_envs)
+        self.observation_space = observation_space(self._sim.facts["image_size"], self._sim.facts["far"], batch=num_envs)
         self.action_space = action_space(batch=num_envs)
         self._frames = None
 

@@ -105,6 +105,19 @@ impl Slot {
     }
 }
 
+/// An env config's facts for Python: `task` (its name), `image_size` (side of the square images,
+/// pixels), `far` (the depth of background pixels, the camera's far distance, m: the largest depth),
+/// `max_steps` (the episode step limit), `render` (whether observations carry images).
+fn facts<'py>(py: Python<'py>, c: &EnvConfig) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("task", c.task.name())?;
+    d.set_item("image_size", c.camera.width)?;
+    d.set_item("far", c.camera.far)?;
+    d.set_item("max_steps", c.max_steps)?;
+    d.set_item("render", c.render)?;
+    Ok(d)
+}
+
 /// Locks an env, or says that an earlier internal error left it unusable.
 fn lock<T>(m: &Mutex<T>) -> PyResult<MutexGuard<'_, T>> {
     m.lock().map_err(|_| {
@@ -208,34 +221,10 @@ impl SimEnv {
         guard(|| Ok(lock(&self.slot)?.steps_left()))
     }
 
-    /// The task's name.
+    /// The env's facts: `task`, `image_size`, `far`, `max_steps`, `render` (a dict).
     #[getter]
-    fn task(&self) -> &'static str {
-        self.config.task.name()
-    }
-
-    /// Side of the square images, pixels.
-    #[getter]
-    fn image_size(&self) -> usize {
-        self.config.camera.width
-    }
-
-    /// Depth of background pixels (the camera's far distance), m: the largest depth value.
-    #[getter]
-    fn far(&self) -> f64 {
-        self.config.camera.far
-    }
-
-    /// The episode step limit.
-    #[getter]
-    fn max_steps(&self) -> u32 {
-        self.config.max_steps
-    }
-
-    /// Whether observations carry images.
-    #[getter]
-    fn render(&self) -> bool {
-        self.config.render
+    fn facts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        facts(py, &self.config)
     }
 }
 
@@ -378,27 +367,9 @@ impl SimVecEnv {
         guard(|| Ok(lock(&self.slots)?.iter().map(Slot::steps_left).collect()))
     }
 
-    /// The task's name.
+    /// The envs' facts: `task`, `image_size`, `far`, `max_steps`, `render` (a dict).
     #[getter]
-    fn task(&self) -> &'static str {
-        self.config.task.name()
-    }
-
-    /// Side of the square images, pixels.
-    #[getter]
-    fn image_size(&self) -> usize {
-        self.config.camera.width
-    }
-
-    /// Depth of background pixels (the camera's far distance), m.
-    #[getter]
-    fn far(&self) -> f64 {
-        self.config.camera.far
-    }
-
-    /// The episode step limit.
-    #[getter]
-    fn max_steps(&self) -> u32 {
-        self.config.max_steps
+    fn facts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        facts(py, &self.config)
     }
 }
