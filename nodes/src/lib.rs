@@ -1,6 +1,9 @@
 //! equiarm's nodes: thin adapters between DDS topics and the library crates.
 //!
-//! [`ros`] is the only module that talks to ros2-client; each node maps topics to library calls.
+//! [`ros`] makes the ROS 2 node, its publishers and subscriptions (ros2-client behind one API);
+//! [`endpoints`] wraps ros2-client's publisher and subscription, and the nodes that pick QoS per topic
+//! or read message metadata ([`echo`], [`player`], [`recorder`], [`policy`]) name ros2-client's QoS and
+//! `MessageInfo` types. Each node maps topics to library calls.
 
 #[cfg(not(any(feature = "jazzy", feature = "humble")))]
 compile_error!("equiarm_nodes needs a ROS 2 distro feature: `jazzy` (the default) or `humble`");

@@ -153,10 +153,11 @@ impl TrainConfig {
     /// The reduced CPU settings for `task`: the paper's algorithm, with 38 px frames cropped
     /// to 32 (the same 0.84 crop ratio as 152 → 128), hidden 8 (an eighth of the fields; at 32 px
     /// the networks are the paper's layers from 32×32 on), batch 64, evaluation over 20 episodes
-    /// every 100 updates, and a quarter of the updates. Chosen for speed: an Equi update takes
-    /// ~0.64 s on 2 cores (CNN 0.14 s), so block pulling's 1,250 updates fit in ~17 min
-    /// (`cargo bench -p equiarm_sac --bench update`). 76 → 64 px costs ~1.5× per update and
-    /// hidden 16 ~4×; neither learned faster per update in our screens.
+    /// every 100 updates, and a quarter of the updates. Chosen for speed, before the CPU kernels
+    /// (an Equi update then took ~0.64 s on 2 cores; today's figures per size and thread count come
+    /// from `cargo bench -p equiarm_sac --bench update` and are in `docs/experiments/kernels.md`).
+    /// Larger frames (76 → 64 px) and hidden 16 cost more per update; neither learned faster per
+    /// update in the screens of that time.
     pub fn reduced(task: TaskKind) -> Self {
         let paper = TrainConfig::paper(task);
         TrainConfig {
