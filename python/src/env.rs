@@ -186,24 +186,19 @@ impl SimEnv {
 
     /// Applies `action` (float array of shape (5,) in the env's units); returns `(observation,
     /// reward, terminated, truncated, info)`.
-    fn step<'py>(&self, py: Python<'py>, action: &Bound<'py, PyAny>) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
+    #[allow(clippy::type_complexity)]
+    fn step<'py>(
+        &self,
+        py: Python<'py>,
+        action: &Bound<'py, PyAny>,
+    ) -> PyResult<(Bound<'py, PyDict>, f32, bool, bool, Bound<'py, PyDict>)> {
         guard(|| {
             let a = self.units.physical(args::action(action, "action")?);
             let out =
                 py.detach(|| -> PyResult<Outcome> { lock(&self.slot)?.step(&a).map_err(|e| sim_error(e, "")) })?;
             let info = out.info(py, self.units)?;
             let (reward, terminated, truncated) = (out.reward, out.terminated, out.truncated);
-            let obs = crate::obs::observation(py, out.obs)?;
-            pyo3::types::PyTuple::new(
-                py,
-                [
-                    obs.into_any(),
-                    reward.into_pyobject(py)?.into_any(),
-                    pyo3::types::PyBool::new(py, terminated).to_owned().into_any(),
-                    pyo3::types::PyBool::new(py, truncated).to_owned().into_any(),
-                    info.into_any(),
-                ],
-            )
+            Ok((crate::obs::observation(py, out.obs)?, reward, terminated, truncated, info))
         })
     }
 

@@ -23,6 +23,15 @@ pub struct Policy {
     checkpoint: PathBuf,
 }
 
+impl Policy {
+    /// The actor, or the error saying an earlier internal error left it unusable.
+    fn agent(&self) -> PyResult<std::sync::MutexGuard<'_, Agent>> {
+        self.agent
+            .lock()
+            .map_err(|_| PyRuntimeError::new_err("policy unusable after an earlier internal error: load it again"))
+    }
+}
+
 fn value_error(arg: &str, e: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(format!("{arg}: {e}"))
 }
@@ -82,10 +91,7 @@ impl Policy {
             let frame = StoredFrame::new(s, color, &depth, holding).map_err(|e| value_error("observation", e))?;
             let mode = if deterministic { ActMode::Greedy } else { ActMode::Sample };
             let u = py.detach(|| -> PyResult<[f32; ACTION_DIM]> {
-                let mut agent = self
-                    .agent
-                    .lock()
-                    .map_err(|_| PyRuntimeError::new_err("policy unusable after an earlier internal error"))?;
+                let mut agent = self.agent()?;
                 let input = agent.config().input_size;
                 if s < input {
                     return Err(value_error(
@@ -110,13 +116,13 @@ impl Policy {
     /// Side of the network input (the centre crop), pixels.
     #[getter]
     fn input_size(&self) -> PyResult<usize> {
-        Ok(self.agent.lock().map_err(|_| PyRuntimeError::new_err("policy unusable"))?.config().input_size)
+        Ok(self.agent()?.config().input_size)
     }
 
     /// The network family (`equi`, `cnn`, …).
     #[getter]
     fn model(&self) -> PyResult<&'static str> {
-        Ok(self.agent.lock().map_err(|_| PyRuntimeError::new_err("policy unusable"))?.config().model.name())
+        Ok(self.agent()?.config().model.name())
     }
 
     /// The checkpoint directory the actor came from.
