@@ -671,7 +671,7 @@ fn small_actor() -> Result<equiarm_nn::nets::EquiActor, SetupError> {
         init::Init,
         nets::{EquiActor, NetConfig},
     };
-    let cfg = NetConfig { hidden: 8, input_size: 8, in_channels: OBS_PLANES };
+    let cfg = NetConfig::new(8, 8, OBS_PLANES);
     EquiActor::new(&cfg, &Init::new(1), &equiarm_nn::device::cpu())
         .map_err(|e| SetupError::project("building the actor")(&e))
 }

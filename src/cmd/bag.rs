@@ -137,7 +137,7 @@ fn eval_policy(
         let dir = equiarm_train::rundir::find_checkpoint(&ckpt)?;
         let m = equiarm_sac::learner::read_manifest(&dir)?;
         let a = &m.config.agent;
-        let cfg = equiarm_nn::nets::NetConfig { hidden: a.hidden, input_size: a.input_size, in_channels: OBS_PLANES };
+        let cfg = equiarm_nn::nets::NetConfig::new(a.hidden, a.input_size, OBS_PLANES);
         (dir.join("actor.safetensors"), a.model.name().to_string(), cfg)
     } else {
         (ckpt, net, preset.config(None))

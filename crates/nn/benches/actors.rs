@@ -18,6 +18,7 @@ use equiarm_nn::burn::module::Module;
 use equiarm_nn::burn::optim::{AdamConfig, GradientsParams};
 use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
 use equiarm_nn::init::Init;
+use equiarm_nn::layers::{ConvAlgo, Numerics};
 use equiarm_nn::nets::{Actor, CnnActor, EquiActor, NetConfig};
 use std::process::Command;
 use std::time::Instant;
@@ -110,11 +111,13 @@ fn parse() -> Args {
     Args { reps: cli.reps as usize, configs, nets, modes, peer: !cli.no_peer, python: cli.python, threads: cli.threads }
 }
 
-fn config(name: &str) -> NetConfig {
-    match name {
+/// The preset `name`, convolving as `numerics` says.
+fn config(name: &str, numerics: Numerics) -> NetConfig {
+    let cfg = match name {
         "paper" => NetConfig::paper(),
         _ => NetConfig::reduced_cpu(),
-    }
+    };
+    cfg.with_numerics(numerics)
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -204,15 +207,16 @@ fn peer(args: &Args, net: &str, cfg: &str, mode: &str, reps: usize) -> Option<f6
 fn main() {
     let args = parse();
     // EQUIARM_CONV=unfold: convolutions as unfold + matmul (see equiarm_nn::layers::ConvAlgo).
-    if std::env::var("EQUIARM_CONV").as_deref() == Ok("unfold") {
-        equiarm_nn::layers::set_conv_algo(equiarm_nn::layers::ConvAlgo::Unfold);
+    let numerics = if std::env::var("EQUIARM_CONV").as_deref() == Ok("unfold") {
         println!("convolution: unfold + matmul");
+        Numerics::algo(ConvAlgo::Unfold)
     } else {
-        println!("convolution: burn conv2d");
-    }
+        println!("convolution: our kernels");
+        Numerics::DEFAULT
+    };
     println!("{:<6} {:<8} {:<11} {:>12} {:>12} {:>8}", "net", "config", "mode", "burn-flex s", "torch s", "ratio");
     for &cfg_name in &args.configs {
-        let cfg = config(cfg_name);
+        let cfg = config(cfg_name, numerics);
         for &net in &args.nets {
             for &mode in &args.modes {
                 // batch 1 is cheap and noisy: take more runs

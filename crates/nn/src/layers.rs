@@ -15,10 +15,11 @@
 use crate::basis::{BasisError, kernel_basis};
 use crate::group::Element;
 use crate::init::Init;
+use crate::kernels::MatmulPrecision;
 use crate::repr::FieldType;
 use burn::module::{Module, Param};
-use burn::tensor::module::{conv2d, max_pool2d};
-use burn::tensor::ops::{ConvOptions, MaxPoolOptions};
+use burn::tensor::module::conv2d;
+use burn::tensor::ops::ConvOptions;
 use burn::tensor::{Device, Tensor, TensorData};
 use thiserror::Error;
 
@@ -46,10 +47,11 @@ pub enum LayerError {
 }
 
 /// How convolutions are computed (all give the same result up to float rounding).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ConvAlgo {
     /// Our kernels ([`crate::kernels`]): im2col + large GEMMs forward and backward, bias and
     /// ReLU fused, on `flex`; burn's `conv2d` on other backends. The default.
+    #[default]
     Kernels,
     /// burn's `conv2d` (im2col + gemm forward; its backward is a transposed conv and a conv
     /// with an H×W kernel for the weight gradient): the reference the kernels are tested against.
@@ -61,29 +63,45 @@ pub enum ConvAlgo {
     Unfold,
 }
 
-static CONV_ALGO: std::sync::atomic::AtomicU8 = std::sync::atomic::AtomicU8::new(0);
-
-/// Choose the convolution algorithm for all layers of this process (default
-/// [`ConvAlgo::Kernels`]). A process-wide switch so that tests and benchmarks can compare them on
-/// the same networks.
-pub fn set_conv_algo(algo: ConvAlgo) {
-    CONV_ALGO.store(algo as u8, std::sync::atomic::Ordering::Relaxed);
+/// How a layer computes its convolutions. Chosen in the network's config
+/// ([`crate::nets::NetConfig::numerics`]) and kept by each layer, so that networks of one process
+/// can differ (the tests compare the algorithms on the same weights; the learner sets the
+/// precision from `agent.matmul`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Numerics {
+    /// The convolution algorithm.
+    pub conv: ConvAlgo,
+    /// The precision of [`ConvAlgo::Kernels`]'s GEMMs (the other algorithms run in `f32`).
+    pub matmul: MatmulPrecision,
 }
 
-/// The current convolution algorithm.
-pub fn conv_algo() -> ConvAlgo {
-    match CONV_ALGO.load(std::sync::atomic::Ordering::Relaxed) {
-        1 => ConvAlgo::Burn,
-        2 => ConvAlgo::Unfold,
-        _ => ConvAlgo::Kernels,
+impl Numerics {
+    /// Our kernels in `f32` (the default).
+    pub const DEFAULT: Numerics = Numerics { conv: ConvAlgo::Kernels, matmul: MatmulPrecision::F32 };
+
+    /// Our kernels with their GEMMs in `matmul`.
+    pub const fn kernels(matmul: MatmulPrecision) -> Self {
+        Numerics { conv: ConvAlgo::Kernels, matmul }
+    }
+
+    /// `algo` with `f32` GEMMs.
+    pub const fn algo(conv: ConvAlgo) -> Self {
+        Numerics { conv, matmul: MatmulPrecision::F32 }
     }
 }
 
-/// Stride-1 convolution with the algorithm chosen by [`set_conv_algo`], followed by ReLU when
-/// `relu` (fused into the kernels' passes with [`ConvAlgo::Kernels`]).
-pub fn conv2d_stride1(x: Tensor<4>, kernel: Tensor<4>, bias: Tensor<1>, padding: usize, relu: bool) -> Tensor<4> {
-    let y = match conv_algo() {
-        ConvAlgo::Kernels => return crate::kernels::conv2d_fused(x, kernel, bias, padding, relu),
+/// Stride-1 convolution as `numerics` says, followed by ReLU when `relu` (fused into the kernels'
+/// passes with [`ConvAlgo::Kernels`]).
+pub fn conv2d_stride1(
+    x: Tensor<4>,
+    kernel: Tensor<4>,
+    bias: Tensor<1>,
+    padding: usize,
+    relu: bool,
+    numerics: Numerics,
+) -> Tensor<4> {
+    let y = match numerics.conv {
+        ConvAlgo::Kernels => return crate::kernels::conv2d_fused(x, kernel, bias, padding, relu, numerics.matmul),
         ConvAlgo::Burn => conv2d(x, kernel, Some(bias), ConvOptions::new([1, 1], [padding, padding], [1, 1], 1)),
         ConvAlgo::Unfold => conv2d_unfold(x, kernel, Some(bias), padding),
     };
@@ -126,6 +144,8 @@ pub struct EquivariantConv {
     /// For each output run: (fields, dim, has bias).
     #[module(skip)]
     out_runs: Vec<(usize, usize, bool)>,
+    #[module(skip)]
+    numerics: Numerics,
     kernel_size: usize,
     padding: usize,
     in_channels: usize,
@@ -134,13 +154,15 @@ pub struct EquivariantConv {
 
 impl EquivariantConv {
     /// Build the layer: solve the kernel bases (once) and draw He-like initial weights from
-    /// `init` for parameter path `path` (e.g. `actor.enc.conv1`).
+    /// `init` for parameter path `path` (e.g. `actor.enc.conv1`); it convolves as `numerics` says.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         path: &str,
         in_type: &FieldType,
         out_type: &FieldType,
         kernel_size: usize,
         padding: usize,
+        numerics: Numerics,
         init: &Init,
         device: &Device,
     ) -> Result<Self, LayerError> {
@@ -223,6 +245,7 @@ impl EquivariantConv {
             cached: None,
             plan,
             out_runs,
+            numerics,
             kernel_size,
             padding,
             in_channels: in_type.size(),
@@ -303,7 +326,12 @@ impl EquivariantConv {
             _ => self.kernel(),
         };
         let bias = self.dense_bias(&x.device());
-        conv2d_stride1(x, kernel, bias, self.padding, relu)
+        conv2d_stride1(x, kernel, bias, self.padding, relu, self.numerics)
+    }
+
+    /// How it convolves.
+    pub fn numerics(&self) -> Numerics {
+        self.numerics
     }
 
     /// Number of input channels.
@@ -323,13 +351,11 @@ pub fn relu<const D: usize>(x: Tensor<D>) -> Tensor<D> {
     burn::tensor::activation::relu(x)
 }
 
-/// 2×2 max-pool with stride 2, per channel (e2cnn `PointwiseMaxPool`). Field type unchanged;
-/// equivariant for permutation representations and even spatial sizes.
+/// 2×2 max-pool with stride 2, per channel (e2cnn `PointwiseMaxPool`): our kernel on `flex`, burn's
+/// `max_pool2d` elsewhere ([`crate::kernels::max_pool2x2`]). Field type unchanged; equivariant for
+/// permutation representations and even spatial sizes.
 pub fn max_pool2(x: Tensor<4>) -> Tensor<4> {
-    match conv_algo() {
-        ConvAlgo::Kernels => crate::kernels::max_pool2x2(x),
-        ConvAlgo::Burn | ConvAlgo::Unfold => max_pool2d(x, MaxPoolOptions::new([2, 2])),
-    }
+    crate::kernels::max_pool2x2(x)
 }
 
 /// Group pooling (e2cnn `GroupPooling`): max over the channels of each field. Input: `fields`

@@ -19,7 +19,7 @@
 
 use crate::group::Group;
 use crate::init::Init;
-use crate::layers::{EquivariantConv, LayerError, concat, group_pool, max_pool2, relu};
+use crate::layers::{EquivariantConv, LayerError, Numerics, concat, group_pool, max_pool2, relu};
 use crate::plain::{Conv, Linear};
 use crate::repr::{FieldType, Representation};
 use burn::module::Module;
@@ -53,27 +53,39 @@ pub struct NetConfig {
     pub input_size: usize,
     /// Input channels (paper: 5 = RGBD + holding plane for SAC, 8 for rotation estimation).
     pub in_channels: usize,
+    /// How every convolution of the network computes (default: our kernels in `f32`).
+    pub numerics: Numerics,
 }
 
 impl NetConfig {
     /// Paper settings for the SAC nets: hidden 64, 128 px, 5 channels.
     pub const fn paper() -> Self {
-        NetConfig { hidden: 64, input_size: 128, in_channels: OBS_PLANES }
+        NetConfig { hidden: 64, input_size: 128, in_channels: OBS_PLANES, numerics: Numerics::DEFAULT }
     }
 
     /// Paper settings for SEN fc2: hidden 32, 128 px, 5 channels.
     pub const fn paper_sen() -> Self {
-        NetConfig { hidden: 32, input_size: 128, in_channels: OBS_PLANES }
+        NetConfig { hidden: 32, input_size: 128, in_channels: OBS_PLANES, numerics: Numerics::DEFAULT }
     }
 
     /// Paper settings for the rotation-estimation nets: hidden 64, 128 px, 8 channels.
     pub const fn paper_rotation() -> Self {
-        NetConfig { hidden: 64, input_size: 128, in_channels: 8 }
+        NetConfig { hidden: 64, input_size: 128, in_channels: 8, numerics: Numerics::DEFAULT }
     }
 
     /// Reduced CPU config: hidden 16, 64 px, 5 channels (the paper layers from 64×64 on).
     pub const fn reduced_cpu() -> Self {
-        NetConfig { hidden: 16, input_size: 64, in_channels: OBS_PLANES }
+        NetConfig { hidden: 16, input_size: 64, in_channels: OBS_PLANES, numerics: Numerics::DEFAULT }
+    }
+
+    /// `hidden`, `input_size` and `in_channels` with the default numerics.
+    pub const fn new(hidden: usize, input_size: usize, in_channels: usize) -> Self {
+        NetConfig { hidden, input_size, in_channels, numerics: Numerics::DEFAULT }
+    }
+
+    /// The same sizes, convolving as `numerics` says.
+    pub const fn with_numerics(self, numerics: Numerics) -> Self {
+        NetConfig { numerics, ..self }
     }
 
     /// Number of 2×2 pools before the 8×8 map: `input_size = 8·2^p`.
@@ -121,18 +133,19 @@ fn pool_flags(layers: &[(usize, usize, bool)]) -> Vec<bool> {
     layers.iter().map(|l| l.2).collect()
 }
 
-/// Plain 3×3 convs from `cin` channels through `layers`, named `{prefix}{i}`; with the last width.
+/// Plain 3×3 convs from the config's input channels through `layers`, named `{prefix}{i}`; with the
+/// last width.
 fn plain_convs(
     prefix: &str,
-    cin: usize,
+    cfg: &NetConfig,
     layers: &[(usize, usize, bool)],
     init: &Init,
     device: &Device,
 ) -> (Vec<Conv>, usize) {
-    let mut cin = cin;
+    let mut cin = cfg.in_channels;
     let mut convs = Vec::new();
     for (i, &(w, pad, _)) in layers.iter().enumerate() {
-        convs.push(Conv::new(&format!("{prefix}{i}"), cin, w, 3, pad, init, device));
+        convs.push(Conv::new(&format!("{prefix}{i}"), cin, w, 3, pad, cfg.numerics, init, device));
         cin = w;
     }
     (convs, cin)
@@ -158,7 +171,16 @@ impl EquiEncoder {
         let mut convs = Vec::new();
         for (i, &(f, pad, _)) in layers.iter().enumerate() {
             let out_type = FieldType::regular(group, f);
-            convs.push(EquivariantConv::new(&format!("{path}.convs.{i}"), &in_type, &out_type, 3, pad, init, device)?);
+            convs.push(EquivariantConv::new(
+                &format!("{path}.convs.{i}"),
+                &in_type,
+                &out_type,
+                3,
+                pad,
+                cfg.numerics,
+                init,
+                device,
+            )?);
             in_type = out_type;
         }
         Ok(EquiEncoder { convs, pools: pool_flags(&layers), out_fields: n })
@@ -250,8 +272,16 @@ impl EquiActor {
     pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
         let g = Group::dihedral(4);
         let enc = EquiEncoder::new("enc", g, cfg, init, device)?;
-        let head =
-            EquivariantConv::new("head", &FieldType::regular(g, cfg.hidden), &actor_out_type(g), 1, 0, init, device)?;
+        let head = EquivariantConv::new(
+            "head",
+            &FieldType::regular(g, cfg.hidden),
+            &actor_out_type(g),
+            1,
+            0,
+            cfg.numerics,
+            init,
+            device,
+        )?;
         Ok(EquiActor { enc, head })
     }
 
@@ -287,14 +317,15 @@ pub struct EquiQHead {
 }
 
 impl EquiQHead {
-    fn new(path: &str, in_type: &FieldType, hidden: usize, init: &Init, device: &Device) -> Result<Self, NetError> {
-        let g = in_type.group();
+    fn new(path: &str, in_type: &FieldType, cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
+        let (g, hidden) = (in_type.group(), cfg.hidden);
         let conv1 = EquivariantConv::new(
             &format!("{path}.conv1"),
             in_type,
             &FieldType::regular(g, hidden),
             1,
             0,
+            cfg.numerics,
             init,
             device,
         )?;
@@ -304,6 +335,7 @@ impl EquiQHead {
             &FieldType::trivial(g, 1),
             1,
             0,
+            cfg.numerics,
             init,
             device,
         )?;
@@ -336,7 +368,7 @@ pub struct EquiCritic {
 fn equi_twin_heads(cfg: &NetConfig, init: &Init, device: &Device) -> Result<(EquiQHead, EquiQHead), NetError> {
     let g = Group::dihedral(4);
     let t = FieldType::regular(g, cfg.hidden).concat(&action_type(g));
-    Ok((EquiQHead::new("q1", &t, cfg.hidden, init, device)?, EquiQHead::new("q2", &t, cfg.hidden, init, device)?))
+    Ok((EquiQHead::new("q1", &t, cfg, init, device)?, EquiQHead::new("q2", &t, cfg, init, device)?))
 }
 
 /// Both heads on the encoder output with the lifted action appended.
@@ -372,7 +404,7 @@ pub struct CnnEncoder {
 impl CnnEncoder {
     fn new(path: &str, cfg: &NetConfig, widths: [usize; 7], init: &Init, device: &Device) -> Result<Self, NetError> {
         let layers = cfg.kept(paper_layers(widths))?;
-        let (convs, _) = plain_convs(&format!("{path}.convs."), cfg.in_channels, &layers, init, device);
+        let (convs, _) = plain_convs(&format!("{path}.convs."), cfg, &layers, init, device);
         Ok(CnnEncoder { convs, pools: pool_flags(&layers) })
     }
 
@@ -408,7 +440,7 @@ impl CnnActor {
         let w = cnn_widths(cfg.hidden);
         Ok(CnnActor {
             enc: CnnEncoder::new("enc", cfg, w, init, device)?,
-            head: Conv::new("head", w[6], 10, 1, 0, init, device),
+            head: Conv::new("head", w[6], 10, 1, 0, cfg.numerics, init, device),
         })
     }
 }
@@ -455,8 +487,8 @@ impl CnnCritic {
     pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
         let w = cnn_widths(cfg.hidden);
         let head = |name: &str| CnnQHead {
-            conv1: Conv::new(&format!("{name}.conv1"), w[6] + 5, w[6], 1, 0, init, device),
-            conv2: Conv::new(&format!("{name}.conv2"), w[6], 1, 1, 0, init, device),
+            conv1: Conv::new(&format!("{name}.conv1"), w[6] + 5, w[6], 1, 0, cfg.numerics, init, device),
+            conv2: Conv::new(&format!("{name}.conv2"), w[6], 1, 1, 0, cfg.numerics, init, device),
         };
         Ok(CnnCritic { enc: CnnEncoder::new("enc", cfg, w, init, device)?, q1: head("q1"), q2: head("q2") })
     }
@@ -488,7 +520,7 @@ impl SenEncoder {
         let w = [n / 2, n, 2 * n, 4 * n, 2 * n];
         let layers =
             cfg.kept([(w[0], 1, true), (w[1], 1, true), (w[2], 1, true), (w[3], 1, true), (w[4], 1, false)])?;
-        let (convs, _) = plain_convs(&format!("{path}.convs."), cfg.in_channels, &layers, init, device);
+        let (convs, _) = plain_convs(&format!("{path}.convs."), cfg, &layers, init, device);
         let fc = Linear::new(&format!("{path}.fc"), 2 * n * 64, 8 * n, init, device);
         Ok(SenEncoder { convs, fc, pools: pool_flags(&layers) })
     }
@@ -529,6 +561,7 @@ impl SenActor {
                 &actor_out_type(g),
                 1,
                 0,
+                cfg.numerics,
                 init,
                 device,
             )?,
@@ -592,6 +625,7 @@ impl RotEquiNet {
                 &FieldType::trivial(g, 8),
                 1,
                 0,
+                cfg.numerics,
                 init,
                 device,
             )?,
@@ -622,8 +656,12 @@ impl RotCnnNet {
     pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
         let n = cfg.hidden;
         let layers = cfg.kept(paper_layers([n / 4, n / 2, n, 2 * n, 4 * n, 4 * n, 2 * n]))?;
-        let (convs, cin) = plain_convs("convs.", cfg.in_channels, &layers, init, device);
-        Ok(RotCnnNet { convs, head: Conv::new("head", cin, 8, 1, 0, init, device), pools: pool_flags(&layers) })
+        let (convs, cin) = plain_convs("convs.", cfg, &layers, init, device);
+        Ok(RotCnnNet {
+            convs,
+            head: Conv::new("head", cin, 8, 1, 0, cfg.numerics, init, device),
+            pools: pool_flags(&layers),
+        })
     }
 
     /// `[B, in_channels, S, S] → logits [B, 8]`.
@@ -681,7 +719,7 @@ pub struct FermConvs {
 impl FermConvs {
     fn new(path: &str, cfg: &NetConfig, init: &Init, device: &Device) -> Result<(Self, usize), NetError> {
         let layers = cfg.kept(ferm_layers(cfg.hidden))?;
-        let (convs, width) = plain_convs(&format!("{path}.convs."), cfg.in_channels, &layers, init, device);
+        let (convs, width) = plain_convs(&format!("{path}.convs."), cfg, &layers, init, device);
         Ok((FermConvs { convs, pools: pool_flags(&layers) }, width * 8 * 8))
     }
 

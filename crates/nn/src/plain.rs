@@ -4,6 +4,7 @@
 //! from our own seeded RNG, so that they are reproducible like the equivariant ones.
 
 use crate::init::Init;
+use crate::layers::Numerics;
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData};
 
@@ -15,11 +16,24 @@ pub struct Conv {
     /// `[out]`.
     pub bias: Param<Tensor<1>>,
     padding: usize,
+    #[module(skip)]
+    numerics: Numerics,
 }
 
 impl Conv {
-    /// A `k×k` conv `cin → cout` with padding `padding`, weights for parameter path `path`.
-    pub fn new(path: &str, cin: usize, cout: usize, k: usize, padding: usize, init: &Init, device: &Device) -> Self {
+    /// A `k×k` conv `cin → cout` with padding `padding`, convolving as `numerics` says, weights for
+    /// parameter path `path`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        path: &str,
+        cin: usize,
+        cout: usize,
+        k: usize,
+        padding: usize,
+        numerics: Numerics,
+        init: &Init,
+        device: &Device,
+    ) -> Self {
         let (fan_in, fan_out) = (cin * k * k, cout * k * k);
         let std = (2.0 / (fan_in + fan_out) as f64).sqrt();
         let w = init.normal(&format!("{path}.weight"), cout * cin * k * k, std);
@@ -28,17 +42,23 @@ impl Conv {
             weight: Param::from_tensor(Tensor::from_data(TensorData::new(w, [cout, cin, k, k]), device)),
             bias: Param::from_tensor(Tensor::from_data(TensorData::new(b, [cout]), device)),
             padding,
+            numerics,
         }
+    }
+
+    /// How it convolves.
+    pub fn numerics(&self) -> Numerics {
+        self.numerics
     }
 
     /// `[B, in, H, W] → [B, out, H + 2p − k + 1, W + 2p − k + 1]`.
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        crate::layers::conv2d_stride1(x, self.weight.val(), self.bias.val(), self.padding, false)
+        crate::layers::conv2d_stride1(x, self.weight.val(), self.bias.val(), self.padding, false, self.numerics)
     }
 
     /// [`Conv::forward`] followed by ReLU (fused into the convolution's passes).
     pub fn forward_relu(&self, x: Tensor<4>) -> Tensor<4> {
-        crate::layers::conv2d_stride1(x, self.weight.val(), self.bias.val(), self.padding, true)
+        crate::layers::conv2d_stride1(x, self.weight.val(), self.bias.val(), self.padding, true, self.numerics)
     }
 }
 
@@ -80,7 +100,7 @@ mod tests {
     fn conv_init_is_xavier_normal_with_pytorchs_default_bias() {
         let dev = Device::flex();
         let (cin, cout, k) = (64, 128, 3);
-        let conv = Conv::new("c", cin, cout, k, 1, &Init::new(0), &dev);
+        let conv = Conv::new("c", cin, cout, k, 1, Numerics::DEFAULT, &Init::new(0), &dev);
         let w = values(conv.weight.val());
         let n = w.len() as f64;
         let mean = w.iter().map(|&x| x as f64).sum::<f64>() / n;

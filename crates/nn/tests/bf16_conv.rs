@@ -1,11 +1,11 @@
 //! The convolution kernels in `bf16` (Intel AMX, [`equiarm_nn::kernels::MatmulPrecision::Bf16`])
 //! against the same kernels in `f32`: forward, input, weight and bias gradients within bfloat16's
 //! rounding, on shapes that take each of the kernels' paths (batched small maps, bands of rows of a
-//! large one, 1×1 and 3×3, odd sizes). One test in its own binary: the precision is process-wide.
+//! large one, 1×1 and 3×3, odd sizes).
 
 use equiarm_nn::init::Init;
+use equiarm_nn::kernels::MatmulPrecision;
 use equiarm_nn::kernels::gemm_conv::{self, ConvShape, Wanted};
-use equiarm_nn::kernels::{MatmulPrecision, set_matmul_precision};
 
 /// `n` values from the project's seeded initialiser (uniform in [−1, 1]).
 fn values(n: usize, seed: u64) -> Vec<f32> {
@@ -29,22 +29,20 @@ fn run(s: &ConvShape, relu: bool, p: MatmulPrecision) -> Results {
     let w = values(s.cout * s.cin * s.k * s.k, 2);
     let b = values(s.cout, 3);
     let forward = |p| {
-        set_matmul_precision(p).unwrap();
         let mut y = vec![0f32; s.batch * s.cout * s.out_h() * s.out_w()];
-        gemm_conv::forward(s, &x, &w, &b, relu, &mut y);
+        gemm_conv::forward(s, p, &x, &w, &b, relu, &mut y);
         y
     };
     let y_exact = forward(MatmulPrecision::F32);
     let y = forward(p);
     let dy = values(y.len(), 4);
-    let g = gemm_conv::backward(s, &x, &w, Some(&y_exact), &dy, relu, Wanted { x: true, weight: true, bias: true });
+    let g = gemm_conv::backward(s, p, &x, &w, Some(&y_exact), &dy, relu, Wanted { x: true, weight: true, bias: true });
     (y, g.x.unwrap(), g.weight.unwrap(), g.bias.unwrap())
 }
 
 #[test]
 fn bf16_kernels_match_the_f32_ones_within_bfloat16_rounding() {
     if let Err(e) = MatmulPrecision::Bf16.supported() {
-        assert!(set_matmul_precision(MatmulPrecision::Bf16).is_err());
         eprintln!("no AMX on this machine ({e}): not run");
         return;
     }

@@ -14,7 +14,7 @@ use equiarm_nn::nets::{Actor, CnnActor, EquiActor, NetConfig};
 use equiarm_types::OBS_PLANES;
 
 fn cfg() -> NetConfig {
-    NetConfig { hidden: 8, input_size: 32, in_channels: OBS_PLANES }
+    NetConfig::new(8, 32, OBS_PLANES)
 }
 
 fn tmpfile(name: &str) -> std::path::PathBuf {

@@ -2,7 +2,8 @@
 //! forward, input gradient, weight gradient and bias gradient within 1e-5 relative (L2) on random
 //! shapes (batch 1 and 64, channels 5–256, sizes 1–48, padding 0 and 1, odd sizes, 1×1 and 3×3,
 //! maps large enough to be worked on in bands of rows),
-//! also through `EquivariantConv` and `Conv`; and their results are the same from run to run.
+//! also through `EquivariantConv` and `Conv` (two layers with the same weights, one per algorithm, in
+//! one process: the algorithm is the layer's own); and their results are the same from run to run.
 
 mod common;
 
@@ -12,16 +13,13 @@ use equiarm_nn::burn::tensor::module::conv2d;
 use equiarm_nn::burn::tensor::ops::ConvOptions;
 use equiarm_nn::group::Group;
 use equiarm_nn::init::Init;
-use equiarm_nn::kernels::conv2d_fused;
-use equiarm_nn::layers::{ConvAlgo, EquivariantConv, set_conv_algo};
+use equiarm_nn::kernels::{MatmulPrecision, conv2d_fused};
+use equiarm_nn::layers::{ConvAlgo, EquivariantConv, Numerics};
 use equiarm_nn::plain::Conv;
 use equiarm_nn::repr::FieldType;
-use std::sync::Mutex;
 
 const TOL: f64 = 1e-5;
-
-/// Tests that switch the process-wide convolution algorithm hold this lock.
-static ALGO: Mutex<()> = Mutex::new(());
+const F32: MatmulPrecision = MatmulPrecision::F32;
 
 fn reference(x: Tensor<4>, w: Tensor<4>, b: Tensor<1>, pad: usize, relu: bool) -> Tensor<4> {
     let y = conv2d(x, w, Some(b), ConvOptions::new([1, 1], [pad, pad], [1, 1], 1));
@@ -56,7 +54,7 @@ fn kernels_match_burn_conv2d_forward_and_gradients() {
         let w = randn::<4>(seed, "w", [cout, cin, k, k], &dev).mul_scalar(0.1).require_grad();
         let b = randn::<1>(seed, "b", [cout], &dev).require_grad();
         let y_ref = reference(x.clone(), w.clone(), b.clone(), pad, relu);
-        let y = conv2d_fused(x.clone(), w.clone(), b.clone(), pad, relu);
+        let y = conv2d_fused(x.clone(), w.clone(), b.clone(), pad, relu, F32);
         let case = format!("batch {batch}, {cin}→{cout}, {size}×{size}, k {k}, pad {pad}, relu {relu}");
         assert_eq!(y.dims(), y_ref.dims(), "{case}: output shape");
         assert!(rel_err(y.clone(), y_ref.clone()) < TOL, "{case}: forward {}", rel_err(y.clone(), y_ref.clone()));
@@ -83,13 +81,13 @@ fn untracked_inputs_get_no_gradient_and_plain_tensors_run_forward() {
     let x = randn::<4>(7, "x", [4, 5, 8, 8], &dev);
     let w = randn::<4>(7, "w", [6, 5, 3, 3], &dev).require_grad();
     let b = randn::<1>(7, "b", [6], &dev).require_grad();
-    let g = conv2d_fused(x.clone(), w.clone(), b.clone(), 1, true).sum().backward();
+    let g = conv2d_fused(x.clone(), w.clone(), b.clone(), 1, true, F32).sum().backward();
     assert!(x.grad(&g).is_none());
     assert!(w.grad(&g).is_some() && b.grad(&g).is_some());
     // Without autodiff: the same forward values.
     let plain = device();
     let (xp, wp, bp) = (x.inner(), w.inner(), b.inner());
-    let y = conv2d_fused(xp.clone(), wp.clone(), bp.clone(), 1, true);
+    let y = conv2d_fused(xp.clone(), wp.clone(), bp.clone(), 1, true, F32);
     let e = reference(xp, wp, bp, 1, true);
     assert_eq!(y.device(), plain);
     assert!(rel_err(y, e) < TOL);
@@ -102,7 +100,7 @@ fn kernels_are_bit_identical_from_run_to_run() {
         let x = randn::<4>(9, "x", [64, 64, 16, 16], &dev).require_grad();
         let w = randn::<4>(9, "w", [128, 64, 3, 3], &dev).require_grad();
         let b = randn::<1>(9, "b", [128], &dev).require_grad();
-        let y = conv2d_fused(x.clone(), w.clone(), b.clone(), 1, true);
+        let y = conv2d_fused(x.clone(), w.clone(), b.clone(), 1, true, F32);
         let g = y.clone().powf_scalar(2.0).sum().backward();
         (values(y), values(x.grad(&g).unwrap()), values(w.grad(&g).unwrap()), values(b.grad(&g).unwrap()))
     };
@@ -110,9 +108,8 @@ fn kernels_are_bit_identical_from_run_to_run() {
     assert!(a.0 == b.0 && a.1 == b.1 && a.2 == b.2 && a.3 == b.3, "two runs differ");
 }
 
-/// Forward and parameter gradients of a layer under one algorithm.
-fn layer_run<F: Fn(Tensor<4>) -> Tensor<4>>(algo: ConvAlgo, f: F, x: Tensor<4>) -> (Tensor<4>, Tensor<4>) {
-    set_conv_algo(algo);
+/// A layer's output and input gradient.
+fn layer_run<F: Fn(Tensor<4>) -> Tensor<4>>(f: F, x: Tensor<4>) -> (Tensor<4>, Tensor<4>) {
     let y = f(x.clone());
     let g = y.clone().powf_scalar(2.0).sum().backward();
     (y, x.grad(&g).unwrap())
@@ -120,41 +117,42 @@ fn layer_run<F: Fn(Tensor<4>) -> Tensor<4>>(algo: ConvAlgo, f: F, x: Tensor<4>) 
 
 #[test]
 fn equivariant_and_plain_convs_give_burns_results_through_the_kernels() {
-    let _lock = ALGO.lock().unwrap_or_else(|e| e.into_inner());
     let dev = device().autodiff();
     let g = Group::dihedral(4);
+    let (burn, ours) = (Numerics::algo(ConvAlgo::Burn), Numerics::DEFAULT);
     for (tin, tout, k, pad, size, batch) in [
         (FieldType::trivial(g, 5), FieldType::regular(g, 8), 3, 1, 16, 64),
         (FieldType::regular(g, 16), FieldType::regular(g, 32), 3, 1, 8, 64),
         (FieldType::regular(g, 32), FieldType::regular(g, 16), 3, 0, 8, 1),
         (FieldType::regular(g, 16), FieldType::regular(g, 16), 1, 0, 1, 64),
     ] {
-        let conv = EquivariantConv::new("c", &tin, &tout, k, pad, &Init::new(4), &dev).unwrap();
+        // The same weights (one seed), one layer per algorithm.
+        let layer = |n| EquivariantConv::new("c", &tin, &tout, k, pad, n, &Init::new(4), &dev).unwrap();
+        let (reference, conv) = (layer(burn), layer(ours));
+        assert_eq!((reference.numerics(), conv.numerics()), (burn, ours));
         let x = randn::<4>(5, "x", [batch, tin.size(), size, size], &dev).require_grad();
         let case = format!("{} → {}, k {k}, {size}×{size}, batch {batch}", tin.describe(), tout.describe());
         for relu in [false, true] {
-            let f = |x: Tensor<4>| if relu { conv.forward_relu(x) } else { conv.forward(x) };
-            let (y_ref, dx_ref) = layer_run(ConvAlgo::Burn, f, x.clone());
-            let (y, dx) = layer_run(ConvAlgo::Kernels, f, x.clone());
+            let act = |c: &EquivariantConv, x: Tensor<4>| if relu { c.forward_relu(x) } else { c.forward(x) };
+            let (y_ref, dx_ref) = layer_run(|x| act(&reference, x), x.clone());
+            let (y, dx) = layer_run(|x| act(&conv, x), x.clone());
             assert!(rel_err(y, y_ref) < TOL, "{case} relu {relu}: forward");
             assert!(rel_err(dx, dx_ref) < TOL, "{case} relu {relu}: input gradient");
         }
         // The free weights' gradients (through the kernel expansion).
-        let weight_grads = |algo| {
-            set_conv_algo(algo);
-            let grads = conv.forward_relu(x.clone()).powf_scalar(2.0).sum().backward();
-            conv.weight.iter().map(|w| w.val().grad(&grads).unwrap()).collect::<Vec<_>>()
+        let weight_grads = |c: &EquivariantConv| {
+            let grads = c.forward_relu(x.clone()).powf_scalar(2.0).sum().backward();
+            c.weight.iter().map(|w| w.val().grad(&grads).unwrap()).collect::<Vec<_>>()
         };
-        let (ref_w, ours) = (weight_grads(ConvAlgo::Burn), weight_grads(ConvAlgo::Kernels));
-        for (a, e) in ours.into_iter().zip(ref_w) {
+        for (a, e) in weight_grads(&conv).into_iter().zip(weight_grads(&reference)) {
             assert!(rel_err(a, e) < TOL, "{case}: free-weight gradient");
         }
     }
-    let conv = Conv::new("p", 7, 12, 3, 1, &Init::new(6), &dev);
+    let plain = |n| Conv::new("p", 7, 12, 3, 1, n, &Init::new(6), &dev);
+    let (reference, conv) = (plain(burn), plain(ours));
     let x = randn::<4>(6, "x", [64, 7, 11, 11], &dev).require_grad();
-    let (y_ref, dx_ref) = layer_run(ConvAlgo::Burn, |x| conv.forward_relu(x), x.clone());
-    let (y, dx) = layer_run(ConvAlgo::Kernels, |x| conv.forward_relu(x), x.clone());
-    set_conv_algo(ConvAlgo::Kernels);
+    let (y_ref, dx_ref) = layer_run(|x| reference.forward_relu(x), x.clone());
+    let (y, dx) = layer_run(|x| conv.forward_relu(x), x.clone());
     assert!(rel_err(y, y_ref) < TOL && rel_err(dx, dx_ref) < TOL, "plain Conv");
 }
 

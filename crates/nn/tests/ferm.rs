@@ -63,7 +63,7 @@ fn layer_norm_normalises_each_row() {
 #[test]
 fn the_actor_trains_its_head_not_the_convs() {
     let dev = device().autodiff();
-    let cfg = NetConfig { hidden: 8, input_size: 16, in_channels: OBS_PLANES };
+    let cfg = NetConfig::new(8, 16, OBS_PLANES);
     let actor = FermActor::new(&cfg, &Init::new(0), &dev).unwrap();
     let x = randn(1, "obs", [2, 5, 16, 16], &dev);
     let (mean, log_std) = actor.forward(x);

@@ -7,7 +7,7 @@ use common::{device, randn, rel_err};
 use equiarm_nn::burn::module::Param;
 use equiarm_nn::group::Group;
 use equiarm_nn::init::Init;
-use equiarm_nn::layers::{EquivariantConv, concat, group_pool, max_pool2, relu, transform};
+use equiarm_nn::layers::{EquivariantConv, Numerics, concat, group_pool, max_pool2, relu, transform};
 use equiarm_nn::repr::{FieldType, Representation};
 
 const TOL: f64 = 1e-4;
@@ -33,7 +33,7 @@ fn randomise_bias(mut conv: EquivariantConv, seed: u64) -> EquivariantConv {
 
 fn check_conv(g: Group, tin: &FieldType, tout: &FieldType, k: usize, pad: usize, size: usize, seed: u64) {
     let dev = device();
-    let conv = EquivariantConv::new("conv", tin, tout, k, pad, &Init::new(seed), &dev).unwrap();
+    let conv = EquivariantConv::new("conv", tin, tout, k, pad, Numerics::DEFAULT, &Init::new(seed), &dev).unwrap();
     let conv = randomise_bias(conv, seed);
     let x = randn::<4>(seed, "x", [2, tin.size(), size, size], &dev);
     let y = conv.forward(x.clone());
@@ -68,7 +68,7 @@ fn conv_is_not_trivially_zero_and_breaks_for_wrong_action() {
     let dev = device();
     let tin = FieldType::trivial(g, 2);
     let tout = FieldType::regular(g, 2);
-    let conv = EquivariantConv::new("c", &tin, &tout, 3, 1, &Init::new(9), &dev).unwrap();
+    let conv = EquivariantConv::new("c", &tin, &tout, 3, 1, Numerics::DEFAULT, &Init::new(9), &dev).unwrap();
     let x = randn::<4>(9, "x", [1, 2, 8, 8], &dev);
     let y = conv.forward(x.clone());
     assert!(common::values(y.clone()).iter().any(|v| v.abs() > 1e-3));
@@ -120,7 +120,7 @@ fn cached_kernel_gives_the_same_output() {
     let g = Group::dihedral(4);
     let dev = device();
     let (tin, tout) = (FieldType::regular(g, 2), mixed(g, 1));
-    let conv = EquivariantConv::new("c", &tin, &tout, 3, 1, &Init::new(3), &dev).unwrap();
+    let conv = EquivariantConv::new("c", &tin, &tout, 3, 1, Numerics::DEFAULT, &Init::new(3), &dev).unwrap();
     let x = randn::<4>(3, "x", [1, tin.size(), 6, 6], &dev);
     let y = conv.forward(x.clone());
     assert!(!conv.uses_cached_kernel());
@@ -129,7 +129,9 @@ fn cached_kernel_gives_the_same_output() {
     assert_eq!(common::values(cached.forward(x)), common::values(y));
     // a module tracked by autodiff never uses a (possibly stale) cache
     let tracked =
-        EquivariantConv::new("c", &tin, &tout, 3, 1, &Init::new(3), &dev.clone().autodiff()).unwrap().cache_kernel();
+        EquivariantConv::new("c", &tin, &tout, 3, 1, Numerics::DEFAULT, &Init::new(3), &dev.clone().autodiff())
+            .unwrap()
+            .cache_kernel();
     assert!(!tracked.uses_cached_kernel());
 }
 

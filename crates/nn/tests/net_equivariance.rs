@@ -14,7 +14,7 @@ use equiarm_types::OBS_PLANES;
 const TOL: f64 = 1e-4;
 
 fn small() -> NetConfig {
-    NetConfig { hidden: 8, input_size: 128, in_channels: OBS_PLANES }
+    NetConfig::new(8, 128, OBS_PLANES)
 }
 
 #[test]
@@ -75,7 +75,7 @@ fn equi_critic_is_invariant() {
 #[test]
 fn c8_rotation_net_is_invariant_under_quarter_turns() {
     let dev = device();
-    let cfg = NetConfig { hidden: 8, input_size: 128, in_channels: 8 };
+    let cfg = NetConfig::new(8, 128, 8);
     let net = RotEquiNet::new(&cfg, &Init::new(4), &dev).unwrap();
     let x = randn::<4>(4, "x", [1, 8, 128, 128], &dev);
     let errs = equivariance_errors(&net, vec![x]);
@@ -89,7 +89,7 @@ fn c8_rotation_net_is_invariant_under_quarter_turns() {
 #[test]
 fn equi_actor_reduced_input_size_is_equivariant() {
     let dev = device();
-    let cfg = NetConfig { hidden: 8, input_size: 64, in_channels: OBS_PLANES };
+    let cfg = NetConfig::new(8, 64, OBS_PLANES);
     let actor = EquiActor::new(&cfg, &Init::new(5), &dev).unwrap();
     let errs = equivariance_errors(&actor, vec![randn::<4>(5, "obs", [1, 5, 64, 64], &dev)]);
     for e in errs {
@@ -102,7 +102,7 @@ fn equi_actor_reduced_input_size_is_equivariant() {
 #[test]
 fn sen_actor_is_not_image_equivariant() {
     let dev = device();
-    let cfg = NetConfig { hidden: 8, input_size: 128, in_channels: OBS_PLANES };
+    let cfg = NetConfig::new(8, 128, OBS_PLANES);
     let actor = SenActor::new(&cfg, &Init::new(6), &dev).unwrap();
     let obs = randn::<4>(6, "obs", [1, 5, 128, 128], &dev);
     let (m, _) = actor.forward(obs.clone());

@@ -44,10 +44,10 @@ fn rotation_estimation_counts() {
 #[test]
 fn invalid_configs_are_refused() {
     let (dev, init) = (device(), Init::new(0));
-    let bad_size = NetConfig { hidden: 8, input_size: 100, in_channels: OBS_PLANES };
+    let bad_size = NetConfig::new(8, 100, OBS_PLANES);
     let err = EquiActor::new(&bad_size, &init, &dev).unwrap_err().to_string();
     assert!(err.contains("input size 100"), "{err}");
-    let bad_hidden = NetConfig { hidden: 12, input_size: 128, in_channels: OBS_PLANES };
+    let bad_hidden = NetConfig::new(12, 128, OBS_PLANES);
     assert!(CnnActor::new(&bad_hidden, &init, &dev).is_err());
 }
 
@@ -58,7 +58,7 @@ fn invalid_configs_are_refused() {
 #[test]
 fn smaller_inputs_drop_the_leading_layers() {
     let (dev, init) = (device(), Init::new(0));
-    let cfg = NetConfig { hidden: 8, input_size: 32, in_channels: OBS_PLANES };
+    let cfg = NetConfig::new(8, 32, OBS_PLANES);
     let actor = EquiActor::new(&cfg, &init, &dev).unwrap();
     let widths: Vec<(usize, usize)> = actor.enc.convs.iter().map(|c| (c.in_channels(), c.out_channels())).collect();
     assert_eq!(widths, [(5, 32), (32, 64), (64, 128), (128, 64), (64, 64)]);

@@ -50,6 +50,9 @@ pub enum RotestError {
     /// Saving or loading network weights failed.
     #[error(transparent)]
     Checkpoint(#[from] equiarm_nn::checkpoint::CheckpointError),
+    /// Saving or loading the optimiser's state failed.
+    #[error(transparent)]
+    Optim(#[from] equiarm_sac::optim::OptimError),
     /// Writing an image or a chart failed.
     #[error("{path}: {message}")]
     Image {

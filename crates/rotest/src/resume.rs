@@ -5,7 +5,7 @@
 //! RUN/resume/state.json         the config, epochs finished, the RNG state, the history, the best epoch
 //! RUN/resume/model.safetensors  the weights being trained
 //! RUN/resume/best.safetensors   the weights of the best validation epoch so far
-//! RUN/resume/adam.bpk           Adam's moments and step count (burn's optimiser record, burnpack)
+//! RUN/resume/adam.safetensors   Adam's moments by parameter path and its step count (equiarm_sac::optim)
 //! ```
 //!
 //! A checkpoint is written to `RUN/resume.tmp/` (`state.json` last) and then renamed to
@@ -13,15 +13,14 @@
 //! the two renames leaves a complete `resume.tmp/`, which is read instead. Both go once the run has
 //! written `run.json`.
 //!
-//! burn keys the optimiser's state by parameter id, and a network built anew draws new random
-//! ids, so every network trained here gets fixed ids in visit order ([`fixed_param_ids`]): the ids
-//! of the network a resumed process rebuilds are those of the one that saved the state.
+//! The optimiser is the SAC learner's ([`equiarm_sac::optim::Adam`]): its state is keyed by parameter
+//! path, so it loads into the network a resumed process rebuilds, on the device that process names.
 
 use std::path::{Path, PathBuf};
 
-use equiarm_nn::burn::module::{Module, ModuleMapper, Param, ParamId};
-use equiarm_nn::burn::optim::ModuleOptimizer;
-use equiarm_nn::burn::tensor::{Bytes, Tensor};
+use equiarm_nn::burn::module::Module;
+use equiarm_nn::burn::tensor::Device;
+use equiarm_sac::optim::{Adam, AdamParams};
 use rand_chacha::ChaCha8Rng;
 
 use crate::error::{Result, RotestError, io};
@@ -33,7 +32,9 @@ const TMP_DIR: &str = "resume.tmp";
 const STATE: &str = "state.json";
 const MODEL: &str = "model.safetensors";
 const BEST: &str = "best.safetensors";
-const ADAM: &str = "adam.bpk";
+const ADAM: &str = "adam.safetensors";
+/// Adam's state as equiarm 0.1 before the shared optimiser wrote it (burn's record).
+const ADAM_BEFORE: &str = "adam.bpk";
 
 /// What `state.json` holds.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -86,13 +87,18 @@ impl Files {
         self.dir.join(BEST)
     }
 
-    /// Loads Adam's state into `optim` (built as the run builds it).
-    pub fn load_optim(&self, optim: ModuleOptimizer) -> Result<ModuleOptimizer> {
+    /// Loads Adam's state for `model`, its moments on `device` (the plain one).
+    pub fn load_optim<M: Module>(&self, params: AdamParams, model: &M, device: &Device) -> Result<Adam> {
         let path = self.dir.join(ADAM);
-        let bytes = std::fs::read(&path).map_err(io(&path))?;
-        optim
-            .from_bytes(Bytes::from_bytes_vec(bytes))
-            .map_err(|e| RotestError::Format { path, message: format!("not an optimiser record: {e}") })
+        if !path.exists() && self.dir.join(ADAM_BEFORE).exists() {
+            return Err(RotestError::Format {
+                path: self.dir.join(ADAM_BEFORE),
+                message: "a checkpoint of an earlier equiarm, whose optimiser state this one does not read: \
+                          delete the run's `resume` directory to start the run over"
+                    .into(),
+            });
+        }
+        Ok(Adam::load(params, model, &path, device)?)
     }
 }
 
@@ -101,7 +107,7 @@ impl Files {
 pub fn write(
     run_dir: &Path,
     state: &ResumeState,
-    optim: &ModuleOptimizer,
+    optim: &Adam,
     save_nets: impl FnOnce(&Files) -> Result<()>,
 ) -> Result<()> {
     let tmp = run_dir.join(TMP_DIR);
@@ -111,11 +117,7 @@ pub fn write(
     std::fs::create_dir_all(&tmp).map_err(io(&tmp))?;
     let files = Files::at(&tmp);
     save_nets(&files)?;
-    let adam = tmp.join(ADAM);
-    let bytes = optim
-        .into_bytes()
-        .map_err(|e| RotestError::Format { path: adam.clone(), message: format!("cannot encode Adam's state: {e}") })?;
-    std::fs::write(&adam, &*bytes).map_err(io(&adam))?;
+    optim.save(&tmp.join(ADAM))?;
     let path = tmp.join(STATE);
     let json = serde_json::to_vec_pretty(state)
         .map_err(|e| RotestError::Format { path: path.clone(), message: e.to_string() })?;
@@ -147,20 +149,4 @@ pub fn rng_state(rng: &ChaCha8Rng) -> (String, u64, String) {
 pub fn rng_from(state: &(String, u64, String), path: &Path) -> Result<ChaCha8Rng> {
     equiarm_sac::rng::load_state(state)
         .map_err(|e| RotestError::Format { path: path.join(STATE), message: e.to_string() })
-}
-
-/// `model` with its parameters numbered in visit order (ids from a fixed base), the same for every
-/// network built from the same code: burn's optimiser state, keyed by id, then loads into a
-/// network rebuilt by another process. The values, and so training, are unchanged.
-pub fn fixed_param_ids<M: Module>(model: M) -> M {
-    struct Numbering(u64);
-    impl ModuleMapper for Numbering {
-        fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
-            let (_, tensor, mapper) = param.consume();
-            self.0 += 1;
-            Param::from_mapped_value(ParamId::from(self.0), tensor, mapper)
-        }
-    }
-    // "rt" in the top bytes: far from burn's own ids, which count up from small numbers or are random
-    model.map(&mut Numbering(0x7274_0000_0000_0000))
 }

@@ -7,12 +7,14 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use equiarm_nn::burn::module::Module;
-use equiarm_nn::burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use equiarm_nn::burn::optim::GradientsParams;
 use equiarm_nn::burn::tensor::activation::log_softmax;
 use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
 use equiarm_nn::init::Init;
 use equiarm_nn::kernels::MatmulPrecision;
+use equiarm_nn::layers::Numerics;
 use equiarm_nn::nets::{NetConfig, RotCnnNet, RotEquiNet};
+use equiarm_sac::optim::{Adam, AdamParams};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -544,7 +546,7 @@ pub enum Outcome {
 /// best validation epoch with its weights (on the plain device).
 struct Progress<M> {
     model: M,
-    optim: ModuleOptimizer,
+    optim: Adam,
     rng: ChaCha8Rng,
     history: Vec<EpochRecord>,
     best: Option<(f64, usize, M)>,
@@ -554,7 +556,7 @@ impl<M: Classifier> Progress<M> {
     fn new(model: M, cfg: &TrainConfig) -> Self {
         Progress {
             model,
-            optim: AdamConfig::new().init(),
+            optim: Adam::new(adam_params(cfg)),
             rng: ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x7261_696e),
             history: Vec::new(),
             best: None,
@@ -584,7 +586,7 @@ impl<M: Classifier> Progress<M> {
     fn start(run_dir: &Path, cfg: &TrainConfig, device: &Device, build: &dyn Fn(&Device) -> Result<M>) -> Result<Self> {
         let train_device = device.clone().autodiff();
         let Some(dir) = resume::find(run_dir) else {
-            return Ok(Progress::new(resume::fixed_param_ids(build(&train_device)?), cfg));
+            return Ok(Progress::new(build(&train_device)?, cfg));
         };
         let state = resume::read_state(&dir)?;
         if state.config != *cfg {
@@ -619,15 +621,22 @@ impl<M: Classifier> Progress<M> {
             });
         }
         let files = resume::Files::at(&dir);
-        let model = resume::fixed_param_ids(equiarm_nn::checkpoint::load(build(&train_device)?, &files.model())?);
+        let model = equiarm_nn::checkpoint::load(build(&train_device)?, &files.model())?;
         let best = match state.best {
             Some((val, epoch)) => Some((val, epoch, equiarm_nn::checkpoint::load(build(device)?, &files.best())?)),
             None => None,
         };
-        let optim = files.load_optim(AdamConfig::new().init())?;
+        let optim = files.load_optim(adam_params(cfg), &model, device)?;
         let rng = resume::rng_from(&state.rng, &dir)?;
         Ok(Progress { model, optim, rng, history: state.history, best })
     }
+}
+
+/// Adam with the run's learning rate and burn's `epsilon` of 1e-5, which every run of this
+/// experiment so far trained with (before it shared the SAC learner's optimiser; PyTorch's default,
+/// and the authors', is 1e-8).
+fn adam_params(cfg: &TrainConfig) -> AdamParams {
+    AdamParams { eps: 1e-5, ..AdamParams::new(cfg.lr) }
 }
 
 /// How [`fit`] ended.
@@ -684,7 +693,7 @@ fn fit<M: Classifier>(
             loss_sum += loss.clone().into_data().try_to_vec::<f32>().map(|v| v[0] as f64).unwrap_or(f64::NAN)
                 * chunk.len() as f64;
             let grads = GradientsParams::from_grads(loss.backward(), &p.model);
-            p.model = p.optim.step(cfg.lr, p.model, grads);
+            p.model = p.optim.step(p.model, grads);
         }
         let eval = p.model.valid();
         let plain = device.clone().inner();
@@ -748,7 +757,7 @@ fn train_net<M: Classifier>(
 
 /// Builds the network of `cfg` on `device`.
 fn net_config(cfg: &TrainConfig) -> NetConfig {
-    NetConfig { hidden: cfg.hidden, input_size: cfg.input, in_channels: CHANNELS }
+    NetConfig::new(cfg.hidden, cfg.input, CHANNELS).with_numerics(Numerics::kernels(cfg.matmul))
 }
 
 /// The whole run on `device` (a plain device, e.g. from `equiarm_nn::device::open`; autodiff is
@@ -782,8 +791,7 @@ pub fn run_with(
     on_epoch: &mut dyn FnMut(&EpochRecord),
 ) -> Result<Outcome> {
     cfg.validate()?;
-    equiarm_nn::kernels::set_matmul_precision(cfg.matmul)
-        .map_err(|message| RotestError::Config { field: "--matmul", message })?;
+    cfg.matmul.supported().map_err(|message| RotestError::Config { field: "--matmul", message })?;
     let [tr, va, te] = split(ds.len(), cfg)?;
     let side = cfg.full_side();
     let mut train = Samples::from_dataset(ds, &tr, side)?;

@@ -104,6 +104,24 @@ fn a_checkpoint_of_another_configuration_or_a_damaged_one_is_refused_naming_it()
 }
 
 #[test]
+fn a_checkpoint_whose_optimiser_state_is_damaged_or_from_before_is_refused_naming_the_file() {
+    let ds = data(20, 12);
+    let cfg = tiny(ModelKind::Cnn);
+    let dir = scratch("optimiser");
+    assert_eq!(stop_after(&ds, &cfg, &dir, 1), Outcome::Stopped { epoch: 1 });
+    let adam = dir.join(RESUME_DIR).join("adam.safetensors");
+    let saved = std::fs::read(&adam).unwrap();
+    std::fs::write(&adam, &saved[..saved.len() / 2]).unwrap();
+    let e = train::run(&ds, &cfg, &Device::flex(), &dir, &mut |_| {}).unwrap_err().to_string();
+    assert!(e.contains("adam.safetensors"), "{e}");
+    // A checkpoint of an earlier equiarm held burn's optimiser record instead.
+    std::fs::rename(&adam, dir.join(RESUME_DIR).join("adam.bpk")).unwrap();
+    let e = train::run(&ds, &cfg, &Device::flex(), &dir, &mut |_| {}).unwrap_err().to_string();
+    assert!(e.contains("adam.bpk") && e.contains("delete the run's `resume` directory"), "{e}");
+    assert!(!dir.join("run.json").exists());
+}
+
+#[test]
 fn a_run_directory_another_process_trains_in_is_refused() {
     let ds = data(20, 13);
     let dir = scratch("busy");

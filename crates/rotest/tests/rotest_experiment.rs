@@ -154,7 +154,7 @@ fn a_trained_c8_net_predicts_the_same_class_for_both_images_rotated_by_90_degree
     assert_eq!(saved, rec);
 
     let dev = Device::flex();
-    let ncfg = NetConfig { hidden: 8, input_size: 16, in_channels: 8 };
+    let ncfg = NetConfig::new(8, 16, 8);
     let fresh = RotEquiNet::new(&ncfg, &Init::new(0), &dev).unwrap();
     let net = equiarm_nn::checkpoint::load(
         RotEquiNet::new(&ncfg, &Init::new(0), &dev).unwrap(),

@@ -215,7 +215,7 @@ fn main() {
                     peer(model, preset_name, threads, args.reps)
                 };
                 for &mm in &args.matmul {
-                    // Building the agent sets the process's precision from its config.
+                    // The agent's networks convolve in its config's precision.
                     let cfg = AgentConfig { matmul: mm, ..cfg.clone() };
                     let (u, a, flops) = pool.install(|| {
                         let data = random_batch(b, s, 3);

@@ -29,6 +29,7 @@ use equiarm_nn::burn::optim::GradientsParams;
 use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
 use equiarm_nn::init::Init;
 use equiarm_nn::kernels::MatmulPrecision;
+use equiarm_nn::layers::Numerics;
 use equiarm_nn::nets::{
     Actor, CnnActor, CnnCritic, Critic, CurlBilinear, EquiActor, EquiCritic, FermActor, FermCritic, FermEncoder,
     NetConfig, SenActor, SenCritic, gaussian_sample,
@@ -161,9 +162,9 @@ impl Default for AgentConfig {
 }
 
 impl AgentConfig {
-    /// The networks' size configuration.
+    /// The networks' configuration: their sizes, and our kernels with their GEMMs in `matmul`.
     pub fn net_config(&self) -> NetConfig {
-        NetConfig { hidden: self.hidden, input_size: self.input_size, in_channels: OBS_PLANES }
+        NetConfig::new(self.hidden, self.input_size, OBS_PLANES).with_numerics(Numerics::kernels(self.matmul))
     }
 }
 
@@ -868,7 +869,7 @@ impl Agent {
     /// A fresh agent of `cfg.model` on `device` (see [`equiarm_nn::device`]), weights and noise
     /// seeded with `seed`. On the CPU this is [`Agent::new`], bit for bit.
     pub fn new_on(cfg: AgentConfig, seed: u64, device: &Device) -> Result<Self, AgentError> {
-        equiarm_nn::kernels::set_matmul_precision(cfg.matmul).map_err(AgentError::Matmul)?;
+        cfg.matmul.supported().map_err(AgentError::Matmul)?;
         Ok(match cfg.model {
             ModelKind::Equi => Agent::Equi(Sac::build_on(cfg, seed, device, EquiActor::new, EquiCritic::new)?),
             ModelKind::Cnn => Agent::Cnn(Sac::build_on(cfg, seed, device, CnnActor::new, CnnCritic::new)?),

@@ -1,23 +1,27 @@
 //! `agent.matmul = "bf16"` (Intel AMX): the same SAC updates as in `f32` up to bfloat16's rounding,
-//! and a clear refusal when an agent is built where the CPU has no AMX. One test in its own binary: the precision is
-//! process-wide, so no other test may run beside it.
+//! and a clear refusal when an agent is built where the CPU has no AMX. The precision is the agent's
+//! own (its networks' config): an `f32` and a `bf16` agent live side by side in one process.
 
-use equiarm_nn::kernels::{MatmulPrecision, matmul_precision};
+use equiarm_nn::kernels::MatmulPrecision;
 use equiarm_sac::agent::{Agent, AgentConfig, ModelKind};
 use equiarm_sac::config::TrainConfig;
 use equiarm_sac::timing::random_batch;
 
-/// Losses of three updates of a fresh agent (seed 3) on fixed random batches.
+/// A fresh agent (seed 3).
+fn agent(model: ModelKind, matmul: MatmulPrecision) -> Agent {
+    Agent::new(AgentConfig { model, hidden: 8, input_size: 16, matmul, ..AgentConfig::default() }, 3).unwrap()
+}
+
+/// The losses of update `i` on a fixed random batch.
+fn update(agent: &mut Agent, i: u64) -> [f32; 3] {
+    let (m, _) = agent.update(random_batch(16, 16, 10 + i)).unwrap();
+    [m.qf1_loss, m.qf2_loss, m.actor_loss]
+}
+
+/// Losses of three updates of a fresh agent.
 fn losses(model: ModelKind, matmul: MatmulPrecision) -> Vec<[f32; 3]> {
-    let cfg = AgentConfig { model, hidden: 8, input_size: 16, matmul, ..AgentConfig::default() };
-    let mut agent = Agent::new(cfg, 3).unwrap();
-    assert_eq!(matmul_precision(), matmul, "building the agent sets the process's precision");
-    (0..3)
-        .map(|i| {
-            let (m, _) = agent.update(random_batch(16, 16, 10 + i)).unwrap();
-            [m.qf1_loss, m.qf2_loss, m.actor_loss]
-        })
-        .collect()
+    let mut a = agent(model, matmul);
+    (0..3).map(|i| update(&mut a, i)).collect()
 }
 
 #[test]
@@ -28,18 +32,18 @@ fn bf16_updates_follow_the_f32_ones_or_are_refused_without_amx() {
     // machine is checked when an agent is built.
     cfg.validate().unwrap();
     if let Err(e) = MatmulPrecision::Bf16.supported() {
-        // No AMX here: building the agent refuses, naming the field and the fix, and f32 stays.
+        // No AMX here: building the agent refuses, naming the field and the fix.
         let a = Agent::new(cfg.agent.clone(), 0).err().expect("refused").to_string();
         assert!(a.contains("agent.matmul") && a.contains("AMX") && a.contains("use f32"), "{a}");
-        assert_eq!(matmul_precision(), MatmulPrecision::F32);
         eprintln!("no AMX on this machine ({e}): only the refusal was checked");
         return;
     }
     for model in [ModelKind::Equi, ModelKind::Cnn] {
-        let exact = losses(model, MatmulPrecision::F32);
-        let rounded = losses(model, MatmulPrecision::Bf16);
-        let again = losses(model, MatmulPrecision::Bf16);
-        assert_eq!(rounded, again, "{model:?}: bf16 updates are repeatable");
+        // An f32 and a bf16 agent side by side, their updates interleaved: each keeps its precision.
+        let (mut f, mut b) = (agent(model, MatmulPrecision::F32), agent(model, MatmulPrecision::Bf16));
+        let (exact, rounded): (Vec<_>, Vec<_>) = (0..3).map(|i| (update(&mut f, i), update(&mut b, i))).unzip();
+        assert_eq!(exact, losses(model, MatmulPrecision::F32), "{model:?}: the f32 agent ran in f32 beside bf16");
+        assert_eq!(rounded, losses(model, MatmulPrecision::Bf16), "{model:?}: bf16 updates are repeatable");
         let mut largest = 0f32;
         for (e, r) in exact.iter().flatten().zip(rounded.iter().flatten()) {
             let rel = (e - r).abs() / e.abs().max(1e-3);

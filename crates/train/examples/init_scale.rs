@@ -29,7 +29,7 @@ fn main() {
     let x = equiarm_sac::augment::network_input(&refs, &[(c, c); 8], input).unwrap();
     let dev = Device::flex();
     let mut t = Tensor::<4>::from_data(TensorData::new(x, [8, OBS_PLANES, input, input]), &dev);
-    let net = NetConfig { hidden, input_size: input, in_channels: OBS_PLANES };
+    let net = NetConfig::new(hidden, input, OBS_PLANES);
     let actor = EquiActor::new(&net, &Init::new(0), &dev).unwrap();
     println!("input mean/rms {:?}", stats(&t));
     let pools = [true, true, true, false, false, true, false];

@@ -10,6 +10,7 @@
 //! gathers the output gradient. Partial weight and bias gradients are summed over the threads in
 //! thread order, so results are bit-identical from run to run at a given thread count.
 
+use super::MatmulPrecision;
 use gemm::{Parallelism, gemm};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -262,11 +263,26 @@ fn col2im(s: &ConvShape, cols: &[f32], n: usize, rows: (usize, usize), dx: &mut 
     }
 }
 
-/// `dst (m×n) = [dst +] lhs (m×k) · rhs (k×n)` with explicit row and column strides (in floats), in
-/// the process's [`super::MatmulPrecision`]; in bf16, `packed` (when given) is `lhs` already packed.
+/// How [`matmul`] multiplies: in `f32` (the `gemm` crate), or in bf16 on AMX with the left operand
+/// already packed when given.
+#[derive(Clone, Copy)]
+enum Mul<'a> {
+    F32,
+    Bf16(Option<&'a super::amx::PackedLhs>),
+}
+
+impl<'a> Mul<'a> {
+    /// `Bf16(packed)` when `bf16`, else `F32`.
+    fn new(bf16: bool, packed: Option<&'a super::amx::PackedLhs>) -> Self {
+        if bf16 { Mul::Bf16(packed) } else { Mul::F32 }
+    }
+}
+
+/// `dst (m×n) = [dst +] lhs (m×k) · rhs (k×n)` with explicit row and column strides (in floats), as
+/// `mul` says.
 #[allow(clippy::too_many_arguments)]
 fn matmul(
-    packed: Option<&super::amx::PackedLhs>,
+    mul: Mul<'_>,
     m: usize,
     n: usize,
     k: usize,
@@ -292,7 +308,7 @@ fn matmul(
         return;
     }
     FLOPS.fetch_add(2 * (m * n * k) as u64, Ordering::Relaxed);
-    if super::matmul_precision() == super::MatmulPrecision::Bf16 {
+    if let Mul::Bf16(packed) = mul {
         match packed {
             Some(a) => super::amx::matmul_packed(a, n, dst, (dst_rs, dst_cs), accumulate, rhs, (rhs_rs, rhs_cs)),
             None => super::amx::matmul(
@@ -343,8 +359,16 @@ fn matmul(
 
 /// Forward: `y = act(conv(x, weight) + bias)`, `x` `[batch, cin, h, w]`, `weight`
 /// `[cout, cin, k, k]`, `bias` `[cout]`, `y` `[batch, cout, h', w']` (overwritten). `act` is ReLU
-/// when `relu`, else the identity.
-pub fn forward(s: &ConvShape, x: &[f32], weight: &[f32], bias: &[f32], relu: bool, y: &mut [f32]) {
+/// when `relu`, else the identity. The GEMMs run in precision `precision`.
+pub fn forward(
+    s: &ConvShape,
+    precision: MatmulPrecision,
+    x: &[f32],
+    weight: &[f32],
+    bias: &[f32],
+    relu: bool,
+    y: &mut [f32],
+) {
     assert!(s.is_valid(), "conv shape {s:?} has an empty output");
     assert_eq!(x.len(), s.batch * s.in_len(), "conv input length");
     assert_eq!(weight.len(), s.cout * s.kdim(), "conv weight length");
@@ -353,8 +377,9 @@ pub fn forward(s: &ConvShape, x: &[f32], weight: &[f32], bias: &[f32], relu: boo
     let (kd, p, o, wo) = (s.kdim(), s.out_pixels(), s.cout, s.out_w());
     let ranges = thread_ranges(s.batch);
     // bf16: the weights packed once for every piece.
-    let packed = (super::matmul_precision() == super::MatmulPrecision::Bf16)
-        .then(|| super::amx::PackedLhs::new(o, kd, weight, (kd, 1)));
+    let bf16 = precision == MatmulPrecision::Bf16;
+    let packed = bf16.then(|| super::amx::PackedLhs::new(o, kd, weight, (kd, 1)));
+    let mul = Mul::new(bf16, packed.as_ref());
     // Hand each thread the output rows of its range.
     let mut parts: Vec<(usize, usize, &mut [f32])> = Vec::with_capacity(ranges.len());
     let mut rest = y;
@@ -383,13 +408,13 @@ pub fn forward(s: &ConvShape, x: &[f32], weight: &[f32], bias: &[f32], relu: boo
                     // One sample's rows: [cout, rows·W'] is a strided block of its NCHW output.
                     let ys = &mut ypart[(u.i0 - a) * s.out_len()..][..s.out_len()];
                     let off = u.rows.0 * wo;
-                    matmul(packed.as_ref(), o, nc, kd, &mut ys[off..], (p, 1), false, weight, (kd, 1), cols, (nc, 1));
+                    matmul(mul, o, nc, kd, &mut ys[off..], (p, 1), false, weight, (kd, 1), cols, (nc, 1));
                     for (oc, &bv) in bias.iter().enumerate() {
                         act(&mut ys[oc * p + off..][..nc], bv);
                     }
                 } else {
                     let out = &mut out[..o * nc];
-                    matmul(packed.as_ref(), o, nc, kd, out, (nc, 1), false, weight, (kd, 1), cols, (nc, 1));
+                    matmul(mul, o, nc, kd, out, (nc, 1), false, weight, (kd, 1), cols, (nc, 1));
                     // Scatter [cout, n·P] into NCHW with bias (and ReLU).
                     for i in 0..u.n {
                         let ys = &mut ypart[(u.i0 - a + i) * s.out_len()..][..s.out_len()];
@@ -428,10 +453,12 @@ pub struct Wanted {
 }
 
 /// Backward of [`forward`]: from the output gradient `dy` (and, when `relu`, the forward's output
-/// `y` for the ReLU mask `y > 0`), the input, weight and bias gradients that `want` asks for.
+/// `y` for the ReLU mask `y > 0`), the input, weight and bias gradients that `want` asks for, the
+/// GEMMs in precision `precision`.
 #[allow(clippy::too_many_arguments)]
 pub fn backward(
     s: &ConvShape,
+    precision: MatmulPrecision,
     x: &[f32],
     weight: &[f32],
     y: Option<&[f32]>,
@@ -466,7 +493,7 @@ pub fn backward(
         }
         None => dx_parts.extend(ranges.iter().map(|_| None)),
     }
-    let bf16 = super::matmul_precision() == super::MatmulPrecision::Bf16;
+    let bf16 = precision == MatmulPrecision::Bf16;
     // bf16: the input gradient's left operand Wᵀ packed once for every piece.
     let packed_wt = (bf16 && want.x).then(|| super::amx::PackedLhs::new(kd, o, weight, (1, kd)));
     // Per thread: its partial weight and bias gradients.
@@ -514,16 +541,28 @@ pub fn backward(
                         if let Some(dwt) = dwt.as_mut() {
                             // dWᵀ [kd, cout] += cols [kd, nc] · dzᵀ [nc, cout]: the im2col matrix,
                             // the larger, is AMX's left operand, packed without a transpose.
-                            matmul(None, kd, o, nc, dwt, (o, 1), ui > 0, cols, (nc, 1), dz, (1, nc));
+                            matmul(Mul::Bf16(None), kd, o, nc, dwt, (o, 1), ui > 0, cols, (nc, 1), dz, (1, nc));
                         } else {
                             // dW [cout, kd] += dz [cout, nc] · colsᵀ [nc, kd]
-                            matmul(None, o, kd, nc, dw, (kd, 1), ui > 0, dz, (nc, 1), cols, (1, nc));
+                            matmul(Mul::F32, o, kd, nc, dw, (kd, 1), ui > 0, dz, (nc, 1), cols, (1, nc));
                         }
                     }
                     if let Some(dxp) = dx_part.as_deref_mut() {
                         let dcols = &mut cols[..kd * nc];
                         // dcols [kd, nc] = Wᵀ [kd, cout] · dz [cout, nc]
-                        matmul(packed_wt.as_ref(), kd, nc, o, dcols, (nc, 1), false, weight, (1, kd), dz, (nc, 1));
+                        matmul(
+                            Mul::new(bf16, packed_wt.as_ref()),
+                            kd,
+                            nc,
+                            o,
+                            dcols,
+                            (nc, 1),
+                            false,
+                            weight,
+                            (1, kd),
+                            dz,
+                            (nc, 1),
+                        );
                         let lo = (u.i0 - a) * s.in_len();
                         col2im(s, dcols, u.n, u.rows, &mut dxp[lo..lo + u.n * s.in_len()]);
                     }
@@ -623,11 +662,11 @@ mod tests {
             let b = values(cout, 3);
             let want = naive(&s, &x, &wt, &b);
             let mut y = vec![f32::NAN; want.len()];
-            forward(&s, &x, &wt, &b, false, &mut y);
+            forward(&s, MatmulPrecision::F32, &x, &wt, &b, false, &mut y);
             for (a, e) in y.iter().zip(&want) {
                 assert!((a - e).abs() <= 1e-5 * (1.0 + e.abs()), "{s:?}: {a} vs {e}");
             }
-            forward(&s, &x, &wt, &b, true, &mut y);
+            forward(&s, MatmulPrecision::F32, &x, &wt, &b, true, &mut y);
             for (a, e) in y.iter().zip(&want) {
                 assert!((a - e.max(0.0)).abs() <= 1e-5 * (1.0 + e.abs()), "{s:?} relu: {a} vs {e}");
             }

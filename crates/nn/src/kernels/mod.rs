@@ -13,8 +13,9 @@
 //! - [`pool`], [`max_pool2x2`]: 2×2 max-pooling, forward with the argmax and a backward that
 //!   routes the gradient to it (burn's generic pooling was a seventh of an update).
 //!
-//! - [`amx`]: the GEMMs in bfloat16 on Intel AMX, when [`set_matmul_precision`] asks for
-//!   [`MatmulPrecision::Bf16`] (the config's `agent.matmul`); `f32` through the `gemm` crate otherwise.
+//! - [`amx`]: the GEMMs in bfloat16 on Intel AMX, when the layer's [`MatmulPrecision`] is
+//!   [`MatmulPrecision::Bf16`] (the config's `agent.matmul`, carried by the network's config to each
+//!   layer and by the op into its backward); `f32` through the `gemm` crate otherwise.
 //!
 //! Limitations: stride 1, square kernels, `f32` tensors only (the default float type; bf16 is
 //! only the GEMMs' operand rounding).
@@ -22,8 +23,6 @@
 pub mod amx;
 pub mod gemm_conv;
 pub mod pool;
-
-use std::sync::atomic::{AtomicU8, Ordering};
 
 use burn::backend::TensorMetadata;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
@@ -38,8 +37,8 @@ use burn::tensor::ops::ConvOptions;
 use burn::tensor::{DType, Device, Shape, Tensor, TensorData};
 use gemm_conv::{ConvShape, Wanted};
 
-/// How the convolution kernels multiply matrices. Process-wide ([`set_matmul_precision`]): the
-/// kernels run inside burn's autodiff backward, which passes no options.
+/// How the convolution kernels multiply matrices. Each layer holds its own (from the network's
+/// config); the op keeps it in its autodiff state, so the backward pass uses the forward's.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum MatmulPrecision {
@@ -96,35 +95,18 @@ impl std::str::FromStr for MatmulPrecision {
     }
 }
 
-static PRECISION: AtomicU8 = AtomicU8::new(0);
-
-/// Sets how every convolution of this process multiplies matrices from now on; refuses `bf16`
-/// where AMX is missing (the setting stays as it was).
-pub fn set_matmul_precision(p: MatmulPrecision) -> Result<(), String> {
-    p.supported()?;
-    PRECISION.store(p as u8, Ordering::Relaxed);
-    Ok(())
-}
-
-/// The precision [`set_matmul_precision`] last set (`f32` until then).
-pub fn matmul_precision() -> MatmulPrecision {
-    match PRECISION.load(Ordering::Relaxed) {
-        0 => MatmulPrecision::F32,
-        _ => MatmulPrecision::Bf16,
-    }
-}
-
 /// The custom op, routed by burn's dispatch to `Flex` or `Autodiff<Flex>`.
 #[backend_extension(Flex, Autodiff)]
 pub trait ConvKernelOps: Backend {
     /// `act(conv2d(x, weight) + bias)`, stride 1, zero padding `padding`; `act` is ReLU when
-    /// `relu`. `x` `[B, C, H, W]`, `weight` `[O, C, k, k]`, `bias` `[O]`.
+    /// `relu`; GEMMs in `precision`. `x` `[B, C, H, W]`, `weight` `[O, C, k, k]`, `bias` `[O]`.
     fn fused_conv2d(
         x: FloatTensor<Self>,
         weight: FloatTensor<Self>,
         bias: FloatTensor<Self>,
         padding: usize,
         relu: bool,
+        precision: MatmulPrecision,
     ) -> FloatTensor<Self>;
 
     /// 2×2 max-pooling with stride 2 of `x` `[B, C, H, W]` → `[B, C, H/2, W/2]`.
@@ -161,10 +143,18 @@ fn dims4(shape: &Shape) -> [usize; 4] {
     d.try_into().unwrap_or_else(|d: Vec<usize>| panic!("fused_conv2d: expected a 4-D tensor, got shape {d:?}"))
 }
 
-fn flex_forward(x: &FlexTensor, weight: &FlexTensor, bias: &FlexTensor, padding: usize, relu: bool) -> FlexTensor {
-    let s = conv_shape(x, weight, padding);
+/// How a fused convolution runs besides its tensors: padding, ReLU, precision.
+#[derive(Clone, Copy, Debug)]
+struct Fused {
+    padding: usize,
+    relu: bool,
+    precision: MatmulPrecision,
+}
+
+fn flex_forward(x: &FlexTensor, weight: &FlexTensor, bias: &FlexTensor, f: Fused) -> FlexTensor {
+    let s = conv_shape(x, weight, f.padding);
     let mut y = vec![0f32; s.batch * s.cout * s.out_h() * s.out_w()];
-    gemm_conv::forward(&s, &values(x), &values(weight), &values(bias), relu, &mut y);
+    gemm_conv::forward(&s, f.precision, &values(x), &values(weight), &values(bias), f.relu, &mut y);
     flex_tensor(y, vec![s.batch, s.cout, s.out_h(), s.out_w()])
 }
 
@@ -178,8 +168,15 @@ fn flex_pool(x: &FlexTensor) -> (FlexTensor, Vec<u8>) {
 }
 
 impl ConvKernelOps for Flex {
-    fn fused_conv2d(x: FlexTensor, weight: FlexTensor, bias: FlexTensor, padding: usize, relu: bool) -> FlexTensor {
-        flex_forward(&x, &weight, &bias, padding, relu)
+    fn fused_conv2d(
+        x: FlexTensor,
+        weight: FlexTensor,
+        bias: FlexTensor,
+        padding: usize,
+        relu: bool,
+        precision: MatmulPrecision,
+    ) -> FlexTensor {
+        flex_forward(&x, &weight, &bias, Fused { padding, relu, precision })
     }
 
     fn max_pool2x2(x: FlexTensor) -> FlexTensor {
@@ -208,9 +205,9 @@ impl Backward<Flex, 1> for MaxPoolBackward {
 #[derive(Debug)]
 struct FusedConvBackward;
 
-/// What the backward step keeps: the input, the weight, the output (for the ReLU mask), the
-/// padding and whether ReLU was applied.
-type FusedState = (FlexTensor, FlexTensor, Option<FlexTensor>, usize, bool);
+/// What the backward step keeps: the input, the weight, the output (for the ReLU mask) and how the
+/// forward ran (padding, ReLU, precision).
+type FusedState = (FlexTensor, FlexTensor, Option<FlexTensor>, Fused);
 
 impl Backward<Flex, 3> for FusedConvBackward {
     type State = FusedState;
@@ -218,14 +215,15 @@ impl Backward<Flex, 3> for FusedConvBackward {
     fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _checkpointer: &mut Checkpointer) {
         let [node_x, node_w, node_b] = ops.parents;
         let dy = grads.consume::<Flex>(&ops.node);
-        let (x, weight, y, padding, relu) = ops.state;
+        let (x, weight, y, f) = ops.state;
         let want = Wanted { x: node_x.is_some(), weight: node_w.is_some(), bias: node_b.is_some() };
         if !(want.x || want.weight || want.bias) {
             return;
         }
-        let s = conv_shape(&x, &weight, padding);
+        let s = conv_shape(&x, &weight, f.padding);
         let y_vals = y.as_ref().map(values);
-        let g = gemm_conv::backward(&s, &values(&x), &values(&weight), y_vals.as_deref(), &values(&dy), relu, want);
+        let (xv, wv, dyv) = (values(&x), values(&weight), values(&dy));
+        let g = gemm_conv::backward(&s, f.precision, &xv, &wv, y_vals.as_deref(), &dyv, f.relu, want);
         if let (Some(node), Some(dx)) = (node_x, g.x) {
             grads.register::<Flex>(node.id, flex_tensor(dx, vec![s.batch, s.cin, s.h, s.w]));
         }
@@ -245,16 +243,18 @@ impl<C: CheckpointStrategy> ConvKernelOps for Autodiff<Flex, C> {
         bias: FloatTensor<Self>,
         padding: usize,
         relu: bool,
+        precision: MatmulPrecision,
     ) -> FloatTensor<Self> {
+        let f = Fused { padding, relu, precision };
         match FusedConvBackward.prepare::<C>([x.node(), weight.node(), bias.node()]).compute_bound().stateful() {
             OpsKind::Tracked(prep) => {
                 let (xp, wp, bp) = (x.into_primitive(), weight.into_primitive(), bias.into_primitive());
-                let y = flex_forward(&xp, &wp, &bp, padding, relu);
+                let y = flex_forward(&xp, &wp, &bp, f);
                 let saved = relu.then(|| y.clone());
-                prep.finish((xp, wp, saved, padding, relu), y)
+                prep.finish((xp, wp, saved, f), y)
             }
             OpsKind::UnTracked(prep) => {
-                prep.finish(flex_forward(x.primitive(), weight.primitive(), bias.primitive(), padding, relu))
+                prep.finish(flex_forward(x.primitive(), weight.primitive(), bias.primitive(), f))
             }
         }
     }
@@ -288,9 +288,16 @@ pub fn max_pool2x2(x: Tensor<4>) -> Tensor<4> {
 }
 
 /// `act(conv2d(x, weight) + bias)`, stride 1, zero padding `padding`, `act` = ReLU when `relu`:
-/// our kernels on `flex`, burn's `conv2d` (+ `relu`) elsewhere. `x` `[B, C, H, W]`, `weight`
-/// `[O, C, k, k]` (square), `bias` `[O]`.
-pub fn conv2d_fused(x: Tensor<4>, weight: Tensor<4>, bias: Tensor<1>, padding: usize, relu: bool) -> Tensor<4> {
+/// our kernels on `flex` with their GEMMs in `precision`, burn's `conv2d` (+ `relu`, in `f32`)
+/// elsewhere. `x` `[B, C, H, W]`, `weight` `[O, C, k, k]` (square), `bias` `[O]`.
+pub fn conv2d_fused(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Tensor<1>,
+    padding: usize,
+    relu: bool,
+    precision: MatmulPrecision,
+) -> Tensor<4> {
     if runs_kernels(&x.device()) {
         let out = <Dispatch as ConvKernelOps>::fused_conv2d(
             x.into_dispatch(),
@@ -298,6 +305,7 @@ pub fn conv2d_fused(x: Tensor<4>, weight: Tensor<4>, bias: Tensor<1>, padding: u
             bias.into_dispatch(),
             padding,
             relu,
+            precision,
         );
         Tensor::from_dispatch(out)
     } else {
