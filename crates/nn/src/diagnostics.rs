@@ -12,6 +12,7 @@ use crate::layers::transform;
 use crate::nets::{EquiActor, EquiCritic, RotEquiNet, action_type, actor_out_type, lift_action};
 use crate::repr::FieldType;
 use burn::tensor::Tensor;
+use equiarm_types::ACTION_DIM;
 
 /// A network with a declared geometric interface.
 pub trait Equivariant {
@@ -195,8 +196,10 @@ pub fn check_checkpoint(
         NetKind::EquiActor => equivariance_errors(&load(EquiActor::new(cfg, &init, device)?, path)?, vec![obs]),
         NetKind::RotEqui => equivariance_errors(&load(RotEquiNet::new(cfg, &init, device)?, path)?, vec![obs]),
         NetKind::EquiCritic => {
-            let act: Tensor<2> =
-                Tensor::from_data(TensorData::new(init.normal("check.act", batch * 5, 1.0), [batch, 5]), device);
+            let act: Tensor<2> = Tensor::from_data(
+                TensorData::new(init.normal("check.act", batch * ACTION_DIM, 1.0), [batch, ACTION_DIM]),
+                device,
+            );
             equivariance_errors(&load(EquiCritic::new(cfg, &init, device)?, path)?, vec![obs, lifted(act.tanh())])
         }
     })

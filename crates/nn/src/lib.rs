@@ -18,7 +18,7 @@
 //! use equiarm_nn::{burn::tensor::{Device, Tensor}, init::Init, nets::{Actor, EquiActor, NetConfig}};
 //! let device = Device::flex();
 //! let actor = EquiActor::new(&NetConfig::reduced_cpu(), &Init::new(0), &device).unwrap();
-//! let obs = Tensor::<4>::zeros([1, 5, 64, 64], &device);
+//! let obs = Tensor::<4>::zeros([1, equiarm_types::OBS_PLANES, 64, 64], &device);
 //! let (mean, log_std) = actor.forward(obs);
 //! ```
 //!

@@ -24,7 +24,7 @@ use crate::plain::{Conv, Linear};
 use crate::repr::{FieldType, Representation};
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
-use equiarm_types::OBS_PLANES;
+use equiarm_types::{ACTION_DIM, OBS_PLANES};
 use thiserror::Error;
 
 /// Errors building a network.
@@ -440,7 +440,7 @@ impl CnnActor {
         let w = cnn_widths(cfg.hidden);
         Ok(CnnActor {
             enc: CnnEncoder::new("enc", cfg, w, init, device)?,
-            head: Conv::new("head", w[6], 10, 1, 0, cfg.numerics, init, device),
+            head: Conv::new("head", w[6], 2 * ACTION_DIM, 1, 0, cfg.numerics, init, device),
         })
     }
 }
@@ -450,7 +450,7 @@ impl Actor for CnnActor {
         let y = self.head.forward(self.enc.forward(obs));
         let [b, c, _, _] = y.dims();
         let y: Tensor<2> = y.reshape([b, c]);
-        (y.clone().narrow(1, 0, 5), y.narrow(1, 5, 5).clamp(LOG_STD_MIN, LOG_STD_MAX))
+        (y.clone().narrow(1, 0, ACTION_DIM), y.narrow(1, ACTION_DIM, ACTION_DIM).clamp(LOG_STD_MIN, LOG_STD_MAX))
     }
 }
 
@@ -487,7 +487,7 @@ impl CnnCritic {
     pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
         let w = cnn_widths(cfg.hidden);
         let head = |name: &str| CnnQHead {
-            conv1: Conv::new(&format!("{name}.conv1"), w[6] + 5, w[6], 1, 0, cfg.numerics, init, device),
+            conv1: Conv::new(&format!("{name}.conv1"), w[6] + ACTION_DIM, w[6], 1, 0, cfg.numerics, init, device),
             conv2: Conv::new(&format!("{name}.conv2"), w[6], 1, 1, 0, cfg.numerics, init, device),
         };
         Ok(CnnCritic { enc: CnnEncoder::new("enc", cfg, w, init, device)?, q1: head("q1"), q2: head("q2") })
@@ -857,8 +857,8 @@ impl FermActor {
         let w = ferm_mlp_width(cfg.hidden);
         Ok(FermActor {
             enc: FermEncoder::new("enc", cfg, init, device)?,
-            mean: Mlp::new("mean", FERM_Z_DIM, w, 5, init, device),
-            log_std: Mlp::new("log_std", FERM_Z_DIM, w, 5, init, device),
+            mean: Mlp::new("mean", FERM_Z_DIM, w, ACTION_DIM, init, device),
+            log_std: Mlp::new("log_std", FERM_Z_DIM, w, ACTION_DIM, init, device),
         })
     }
 }

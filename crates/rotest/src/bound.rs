@@ -13,7 +13,7 @@
 //! rotated first-image poses ([`orbit_labels`]). Only invert-label's rule depends on the poses;
 //! under every other setting an orbit has one label and the bound is 1.
 
-use equiarm_sim::rotest::{Corruption, Corruptions, PairMeta};
+use equiarm_sim::rotest::{Corruptions, PairCorruption, PairMeta};
 
 /// Labels of the 8 members of the orbit of a pair whose first image shows `meta.before` and whose
 /// scene was rotated by `idx`·45°: member k is the pair rotated by k·45° (ducks' positions rotated
@@ -26,7 +26,7 @@ pub fn orbit_labels(meta: &PairMeta, idx: u8, setting: &Corruptions) -> [u8; 8] 
             let (dx, dy) = (meta.before[i].x - c[0], meta.before[i].y - c[1]);
             c[1] + s * dx + co * dy
         };
-        if setting.has(Corruption::InvertLabel) { setting.label(idx, y(0), y(1)) } else { idx }
+        if setting.has(PairCorruption::InvertLabel) { setting.label(idx, y(0), y(1)) } else { idx }
     })
 }
 

@@ -13,7 +13,7 @@ use crate::dataset::Dataset;
 use crate::error::Result;
 use crate::generate::{generate, setting_file_stem, write_snapshot};
 use crate::grid::GridArgs;
-use crate::train::{Checkpointing, ModelKind, Outcome, TrainConfig};
+use crate::train::{Checkpointing, ClassifierKind, Outcome, RotestConfig};
 
 /// `equiarm rotest …`.
 #[derive(Debug, clap::Subcommand)]
@@ -23,7 +23,7 @@ pub enum RotestCommand {
         after_help = "Example:\n  equiarm rotest data --corrupt grid,side --pairs 2000 --seed 0 -o data/rotest/side+grid"
     )]
     Data {
-        /// Corruption setting: `none` or a comma-separated list of grid, occlusion,
+        /// PairCorruption setting: `none` or a comma-separated list of grid, occlusion,
         /// random_light_color, light_effect, two_light_color, two_specular, squeeze, reflect,
         /// condition_reverse (invert-label), side.
         #[arg(long, default_value = "none")]
@@ -77,7 +77,7 @@ pub enum RotestCommand {
         data: PathBuf,
         /// The network.
         #[arg(long, value_enum)]
-        model: ModelKind,
+        model: ClassifierKind,
         /// Training pairs N.
         #[arg(long)]
         train_pairs: usize,
@@ -144,7 +144,7 @@ pub enum RotestCommand {
 
 /// One of the experiment's three networks, as `grid --variants` and the run directories name it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Variant {
+pub enum ClassifierVariant {
     /// The C8-equivariant classifier.
     Equi,
     /// The plain CNN.
@@ -154,22 +154,22 @@ pub enum Variant {
     CnnTrans,
 }
 
-impl Variant {
+impl ClassifierVariant {
     /// The directory name below `RUNS/<setting>/`.
     pub fn name(self) -> &'static str {
         match self {
-            Variant::Equi => "equi",
-            Variant::Cnn => "cnn",
-            Variant::CnnTrans => "cnn+trans",
+            ClassifierVariant::Equi => "equi",
+            ClassifierVariant::Cnn => "cnn",
+            ClassifierVariant::CnnTrans => "cnn+trans",
         }
     }
 
     /// The network and the number of pairs rotated by the augmentation, at training-set size `n`.
-    pub fn model(self, n: usize) -> (ModelKind, usize) {
+    pub fn model(self, n: usize) -> (ClassifierKind, usize) {
         match self {
-            Variant::Equi => (ModelKind::Equi, 0),
-            Variant::Cnn => (ModelKind::Cnn, 0),
-            Variant::CnnTrans => (ModelKind::Cnn, n),
+            ClassifierVariant::Equi => (ClassifierKind::Equi, 0),
+            ClassifierVariant::Cnn => (ClassifierKind::Cnn, 0),
+            ClassifierVariant::CnnTrans => (ClassifierKind::Cnn, n),
         }
     }
 }
@@ -237,8 +237,14 @@ impl TrainOpts {
     }
 
     /// The configuration of one run with these options.
-    pub fn config(&self, model: ModelKind, train_pairs: usize, img_trans: usize, seed: u64) -> Result<TrainConfig> {
-        let mut cfg = TrainConfig::paper(model, train_pairs, seed);
+    pub fn config(
+        &self,
+        model: ClassifierKind,
+        train_pairs: usize,
+        img_trans: usize,
+        seed: u64,
+    ) -> Result<RotestConfig> {
+        let mut cfg = RotestConfig::paper(model, train_pairs, seed);
         cfg.hidden = self.hidden.unwrap_or(if self.paper { 64 } else { 16 });
         cfg.input = self.input.unwrap_or(if self.paper { 128 } else { 64 });
         cfg.val_pairs = self.val_pairs;
@@ -268,7 +274,7 @@ fn print_epoch(e: &crate::train::EpochRecord) {
     );
 }
 
-pub(crate) fn summary(r: &crate::train::RunRecord) -> String {
+pub(crate) fn summary(r: &crate::train::RotestRecord) -> String {
     let secs: f64 = r.history.iter().map(|e| e.seconds).sum();
     format!(
         "{} {:?} N={} img-trans {} seed {}: test accuracy {:.4} at best validation epoch {} (val {:.4}); {} epochs, {:.1} s/epoch",

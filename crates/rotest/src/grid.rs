@@ -8,11 +8,11 @@ use std::path::{Path, PathBuf};
 use equiarm_sim::rotest::{Corruptions, PAPER_SETTINGS, PairConfig};
 use equiarm_train::STOPPED_EXIT;
 
-use crate::cli::{TrainOpts, Variant};
+use crate::cli::{ClassifierVariant, TrainOpts};
 use crate::dataset::Dataset;
 use crate::error::{Result, RotestError};
 use crate::generate::{generate, setting_file_stem};
-use crate::train::{Checkpointing, Outcome, TrainConfig};
+use crate::train::{Checkpointing, Outcome, RotestConfig};
 
 /// What names a grid: where its datasets, runs and report are, and which runs it holds.
 #[derive(Clone, Debug, clap::Args)]
@@ -34,7 +34,7 @@ pub struct GridArgs {
     pub seeds: Vec<u64>,
     /// The networks to train (e.g. `cnn` alone for a size only the CNN is run at).
     #[arg(long, value_delimiter = ',', default_value = "equi,cnn,cnn+trans")]
-    pub variants: Vec<Variant>,
+    pub variants: Vec<ClassifierVariant>,
     /// Pairs per generated dataset.
     #[arg(long, default_value_t = 2000)]
     pub pairs: usize,
@@ -75,7 +75,7 @@ pub struct PlannedRun {
     /// `RUNS/<setting>/<variant>/<N>/s<seed>`.
     pub dir: PathBuf,
     /// What it trains.
-    pub cfg: TrainConfig,
+    pub cfg: RotestConfig,
     /// Where it stands.
     pub state: RunState,
 }
@@ -106,7 +106,7 @@ impl GridArgs {
             });
         }
         for &n in &self.sizes {
-            let cfg = self.opts.config(crate::train::ModelKind::Cnn, n, n, 0)?;
+            let cfg = self.opts.config(crate::train::ClassifierKind::Cnn, n, n, 0)?;
             crate::train::split(self.pairs, &cfg)?;
         }
         // The runs a committed report holds (read once: the grid writes the report only at the end).

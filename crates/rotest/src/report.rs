@@ -10,10 +10,10 @@ use std::path::{Path, PathBuf};
 use equiarm_train::plot::{ensure_font, mean_se};
 use plotters::prelude::*;
 
-use equiarm_sim::rotest::Corruption;
+use equiarm_sim::rotest::PairCorruption;
 
 use crate::error::{Result, RotestError, io};
-use crate::train::{ModelKind, RunRecord, TrainConfig};
+use crate::train::{ClassifierKind, RotestConfig, RotestRecord};
 
 /// The variant name of the C8 network.
 pub const EQUI: &str = "Equi";
@@ -24,24 +24,24 @@ pub const CNN_TRANS: &str = "CNN + trans";
 
 /// Name of a run's variant: [`EQUI`], [`CNN`] or [`CNN_TRANS`] (or `Equi + trans`), with
 /// ` (no crop)` when crops were off.
-pub fn variant(r: &RunRecord) -> String {
+pub fn variant(r: &RotestRecord) -> String {
     variant_of(&r.config)
 }
 
 /// [`variant`] of a run's configuration.
-pub fn variant_of(cfg: &TrainConfig) -> String {
+pub fn variant_of(cfg: &RotestConfig) -> String {
     let base = match (cfg.model, cfg.img_trans > 0) {
-        (ModelKind::Equi, false) => EQUI,
-        (ModelKind::Equi, true) => "Equi + trans",
-        (ModelKind::Cnn, false) => CNN,
-        (ModelKind::Cnn, true) => CNN_TRANS,
+        (ClassifierKind::Equi, false) => EQUI,
+        (ClassifierKind::Equi, true) => "Equi + trans",
+        (ClassifierKind::Cnn, false) => CNN,
+        (ClassifierKind::Cnn, true) => CNN_TRANS,
     };
     if cfg.crop { base.to_string() } else { format!("{base} (no crop)") }
 }
 
 /// Every `run.json` below `dir` (recursively), sorted by path. A file that does not parse is an
 /// error naming it.
-pub fn collect_runs(dir: &Path) -> Result<Vec<(PathBuf, RunRecord)>> {
+pub fn collect_runs(dir: &Path) -> Result<Vec<(PathBuf, RotestRecord)>> {
     let mut files = Vec::new();
     let mut stack = vec![dir.to_path_buf()];
     while let Some(d) = stack.pop() {
@@ -70,7 +70,7 @@ pub fn collect_runs(dir: &Path) -> Result<Vec<(PathBuf, RunRecord)>> {
 pub type Table = BTreeMap<String, BTreeMap<String, BTreeMap<usize, Vec<f64>>>>;
 
 /// Groups runs into a [`Table`].
-pub fn table(runs: &[(PathBuf, RunRecord)]) -> Table {
+pub fn table(runs: &[(PathBuf, RotestRecord)]) -> Table {
     let mut t = Table::new();
     for (_, r) in runs {
         t.entry(r.corrupt.clone())
@@ -165,7 +165,7 @@ impl std::fmt::Display for Diff {
 /// Whether a setting's labels are inverted by the objects' arrangement (invert-label), the one
 /// setting where the paper expects the CNN ahead.
 fn inverts_labels(setting: &str) -> bool {
-    setting.split(',').any(|w| Corruption::from_name(w.trim()) == Some(Corruption::InvertLabel))
+    setting.split(',').any(|w| PairCorruption::from_name(w.trim()) == Some(PairCorruption::InvertLabel))
 }
 
 /// `a − b` for every setting of `settings` and training size both variants have: a Markdown table
@@ -455,17 +455,17 @@ pub fn overview(path: &Path, t: &Table, bounds: &BTreeMap<String, f64>) -> Resul
 pub const ARCHIVE_FILE: &str = "rotest_runs.json";
 
 /// The key that names a run in the grid: setting, variant, training pairs, seed.
-pub fn run_key(r: &RunRecord) -> (String, String, usize, u64) {
+pub fn run_key(r: &RotestRecord) -> (String, String, usize, u64) {
     key(&r.corrupt, &r.config)
 }
 
 /// [`run_key`] of a run of setting `corrupt` with configuration `cfg`, before it has run.
-pub fn key(corrupt: &str, cfg: &TrainConfig) -> (String, String, usize, u64) {
+pub fn key(corrupt: &str, cfg: &RotestConfig) -> (String, String, usize, u64) {
     (corrupt.to_string(), variant_of(cfg), cfg.train_pairs, cfg.seed)
 }
 
 /// The archived runs in `path` (none if the file does not exist).
-pub fn read_archive(path: &Path) -> Result<Vec<RunRecord>> {
+pub fn read_archive(path: &Path) -> Result<Vec<RotestRecord>> {
     if !path.is_file() {
         return Ok(Vec::new());
     }
@@ -505,7 +505,8 @@ pub fn write(runs_dir: &Path, out: &Path, bounds: &BTreeMap<String, f64>) -> Res
         claims(&t, bounds)
     );
     std::fs::write(&md, text).map_err(io(&md))?;
-    let mut kept: Vec<RunRecord> = runs.iter().map(|(_, r)| RunRecord { history: Vec::new(), ..r.clone() }).collect();
+    let mut kept: Vec<RotestRecord> =
+        runs.iter().map(|(_, r)| RotestRecord { history: Vec::new(), ..r.clone() }).collect();
     kept.sort_by_key(run_key);
     let json = serde_json::to_vec_pretty(&kept)
         .map_err(|e| RotestError::Format { path: archive.clone(), message: e.to_string() })?;
@@ -524,13 +525,13 @@ pub fn write(runs_dir: &Path, out: &Path, bounds: &BTreeMap<String, f64>) -> Res
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::train::{EpochRecord, TrainConfig};
+    use crate::train::{EpochRecord, RotestConfig};
 
-    fn record(model: ModelKind, n: usize, img_trans: usize, seed: u64, acc: f64) -> RunRecord {
-        let mut config = TrainConfig::paper(model, n, seed);
+    fn record(model: ClassifierKind, n: usize, img_trans: usize, seed: u64, acc: f64) -> RotestRecord {
+        let mut config = RotestConfig::paper(model, n, seed);
         config.img_trans = img_trans;
         let e = EpochRecord { epoch: 1, loss: 1.0, train_acc: acc, val_acc: acc, test_acc: Some(acc), seconds: 1.0 };
-        RunRecord {
+        RotestRecord {
             config,
             corrupt: "condition_reverse".into(),
             data_seed: 0,
@@ -550,10 +551,10 @@ mod tests {
         let root = std::env::temp_dir().join(format!("equiarm_rotest_report_{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&root);
         let runs = [
-            ("equi/100/s0", record(ModelKind::Equi, 100, 0, 0, 0.5)),
-            ("equi/100/s1", record(ModelKind::Equi, 100, 0, 1, 0.6)),
-            ("cnn/100/s0", record(ModelKind::Cnn, 100, 0, 0, 0.7)),
-            ("cnn+trans/400/s0", record(ModelKind::Cnn, 400, 400, 0, 0.8)),
+            ("equi/100/s0", record(ClassifierKind::Equi, 100, 0, 0, 0.5)),
+            ("equi/100/s1", record(ClassifierKind::Equi, 100, 0, 1, 0.6)),
+            ("cnn/100/s0", record(ClassifierKind::Cnn, 100, 0, 0, 0.7)),
+            ("cnn+trans/400/s0", record(ClassifierKind::Cnn, 400, 400, 0, 0.8)),
         ];
         for (dir, r) in &runs {
             let d = root.join("runs").join(dir);
@@ -603,19 +604,19 @@ mod tests {
             }
         };
         // `none`: Equi clearly ahead at 100, behind at 400; CNN + trans close at 100, far at 400
-        add("none", ModelKind::Equi, 100, 0, &[0.80, 0.82]);
-        add("none", ModelKind::Cnn, 100, 0, &[0.40, 0.42]);
-        add("none", ModelKind::Cnn, 100, 100, &[0.79, 0.83]);
-        add("none", ModelKind::Equi, 400, 0, &[0.90]);
-        add("none", ModelKind::Cnn, 400, 0, &[0.95]);
+        add("none", ClassifierKind::Equi, 100, 0, &[0.80, 0.82]);
+        add("none", ClassifierKind::Cnn, 100, 0, &[0.40, 0.42]);
+        add("none", ClassifierKind::Cnn, 100, 100, &[0.79, 0.83]);
+        add("none", ClassifierKind::Equi, 400, 0, &[0.90]);
+        add("none", ClassifierKind::Cnn, 400, 0, &[0.95]);
         // `grid`: equal means from different seeds (a tie, whatever the rounding of the sums)
-        add("grid", ModelKind::Equi, 100, 0, &[0.1, 0.2, 0.3]);
-        add("grid", ModelKind::Cnn, 100, 0, &[0.3, 0.2, 0.1]);
-        add("side,grid", ModelKind::Equi, 100, 0, &[0.70, 0.72]);
-        add("side,grid", ModelKind::Cnn, 100, 0, &[0.50, 0.52]);
-        add("side,grid", ModelKind::Cnn, 100, 100, &[0.50, 0.52]);
-        add("condition_reverse", ModelKind::Equi, 1600, 0, &[0.56, 0.62]);
-        add("condition_reverse", ModelKind::Cnn, 1600, 0, &[0.84, 0.90]);
+        add("grid", ClassifierKind::Equi, 100, 0, &[0.1, 0.2, 0.3]);
+        add("grid", ClassifierKind::Cnn, 100, 0, &[0.3, 0.2, 0.1]);
+        add("side,grid", ClassifierKind::Equi, 100, 0, &[0.70, 0.72]);
+        add("side,grid", ClassifierKind::Cnn, 100, 0, &[0.50, 0.52]);
+        add("side,grid", ClassifierKind::Cnn, 100, 100, &[0.50, 0.52]);
+        add("condition_reverse", ClassifierKind::Equi, 1600, 0, &[0.56, 0.62]);
+        add("condition_reverse", ClassifierKind::Cnn, 1600, 0, &[0.84, 0.90]);
         let t = table(&runs);
         let bounds = BTreeMap::from([("condition_reverse".to_string(), 0.625)]);
         let c = claims(&t, &bounds);

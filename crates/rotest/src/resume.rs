@@ -24,7 +24,7 @@ use equiarm_sac::optim::{Adam, AdamParams};
 use rand_chacha::ChaCha8Rng;
 
 use crate::error::{Result, RotestError, io};
-use crate::train::{EpochRecord, TrainConfig};
+use crate::train::{EpochRecord, RotestConfig};
 
 /// The checkpoint directory below a run directory.
 pub const RESUME_DIR: &str = "resume";
@@ -40,7 +40,7 @@ const ADAM_BEFORE: &str = "adam.bpk";
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ResumeState {
     /// The run's configuration (a checkpoint resumes only the same configuration).
-    pub config: TrainConfig,
+    pub config: RotestConfig,
     /// Epochs finished.
     pub epoch: usize,
     /// The state of the run's random stream (batch order, crops): hex key, stream, word position.

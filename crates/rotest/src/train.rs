@@ -32,7 +32,7 @@ pub const CLASSES: usize = 8;
 /// The network trained.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
-pub enum ModelKind {
+pub enum ClassifierKind {
     /// The C8-equivariant classifier ([`RotEquiNet`]): invariant logits.
     Equi,
     /// The plain CNN ([`RotCnnNet`]).
@@ -59,9 +59,9 @@ impl Classifier for RotCnnNet {
 
 /// Everything a training run is configured by.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct TrainConfig {
+pub struct RotestConfig {
     /// The network.
-    pub model: ModelKind,
+    pub model: ClassifierKind,
     /// Hidden size of the network (paper 64; a multiple of 8).
     pub hidden: usize,
     /// Network input side after cropping, pixels: 16, 32, 64 or 128 (paper 128). The stored images
@@ -97,10 +97,10 @@ pub struct TrainConfig {
     pub matmul: MatmulPrecision,
 }
 
-impl TrainConfig {
+impl RotestConfig {
     /// The paper's settings for `model` with N = `train_pairs`: hidden 64, 128 px, 200/200 split, lr
     /// 1e-4, batch 64, at least 100 epochs, patience 100, at most 1000, random crops.
-    pub fn paper(model: ModelKind, train_pairs: usize, seed: u64) -> Self {
+    pub fn paper(model: ClassifierKind, train_pairs: usize, seed: u64) -> Self {
         Self {
             model,
             hidden: 64,
@@ -369,7 +369,7 @@ fn bilinear(plane: &[f32], side: usize, y: f32, x: f32) -> f32 {
 
 /// The split of a dataset of `len` pairs for `cfg`: a permutation seeded by `cfg.seed`, its first
 /// `train_pairs` for training, the next `val_pairs` for validation, the next `test_pairs` for test.
-pub fn split(len: usize, cfg: &TrainConfig) -> Result<[Vec<usize>; 3]> {
+pub fn split(len: usize, cfg: &RotestConfig) -> Result<[Vec<usize>; 3]> {
     let need = cfg.train_pairs + cfg.val_pairs + cfg.test_pairs;
     if need > len {
         return Err(RotestError::Config {
@@ -409,9 +409,9 @@ pub struct EpochRecord {
 
 /// A finished run: what `run.json` holds.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct RunRecord {
+pub struct RotestRecord {
     /// The configuration.
-    pub config: TrainConfig,
+    pub config: RotestConfig,
     /// The dataset's corruption setting.
     pub corrupt: String,
     /// The dataset's generator seed.
@@ -479,10 +479,10 @@ pub fn run_agreement(
     run_dir: &Path,
     device: &Device,
     disc: bool,
-) -> Result<(RunRecord, Vec<(f64, f64)>)> {
+) -> Result<(RotestRecord, Vec<(f64, f64)>)> {
     let path = run_dir.join("run.json");
     let text = std::fs::read(&path).map_err(io(&path))?;
-    let rec: RunRecord = serde_json::from_slice(&text)
+    let rec: RotestRecord = serde_json::from_slice(&text)
         .map_err(|e| RotestError::Format { path: path.clone(), message: format!("not a run file: {e}") })?;
     let cfg = &rec.config;
     cfg.validate()?;
@@ -498,11 +498,11 @@ pub fn run_agreement(
     let init = Init::new(cfg.seed);
     let weights = run_dir.join("best.safetensors");
     let res = match cfg.model {
-        ModelKind::Equi => {
+        ClassifierKind::Equi => {
             let m = equiarm_nn::checkpoint::load(RotEquiNet::new(&ncfg, &init, device)?, &weights)?;
             rotation_agreement(&m, &rotated, cfg.input, device)
         }
-        ModelKind::Cnn => {
+        ClassifierKind::Cnn => {
             let m = equiarm_nn::checkpoint::load(RotCnnNet::new(&ncfg, &init, device)?, &weights)?;
             rotation_agreement(&m, &rotated, cfg.input, device)
         }
@@ -533,7 +533,7 @@ pub struct Checkpointing<'a> {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Outcome {
     /// The run finished: its record (also in `run.json`).
-    Finished(RunRecord),
+    Finished(RotestRecord),
     /// Stopped when asked, after `epoch` epochs, with a checkpoint in `RUN/resume/`: the same call
     /// continues it.
     Stopped {
@@ -553,7 +553,7 @@ struct Progress<M> {
 }
 
 impl<M: Classifier> Progress<M> {
-    fn new(model: M, cfg: &TrainConfig) -> Self {
+    fn new(model: M, cfg: &RotestConfig) -> Self {
         Progress {
             model,
             optim: Adam::new(adam_params(cfg)),
@@ -564,7 +564,7 @@ impl<M: Classifier> Progress<M> {
     }
 
     /// Writes the checkpoint of `run_dir`.
-    fn save(&self, run_dir: &Path, cfg: &TrainConfig) -> Result<()> {
+    fn save(&self, run_dir: &Path, cfg: &RotestConfig) -> Result<()> {
         let state = resume::ResumeState {
             config: cfg.clone(),
             epoch: self.history.len(),
@@ -583,7 +583,12 @@ impl<M: Classifier> Progress<M> {
 
     /// The progress of `run_dir`'s checkpoint, or a fresh start when it has none. `build` makes the
     /// network on a device (`device` is the plain one; training runs on its autodiff twin).
-    fn start(run_dir: &Path, cfg: &TrainConfig, device: &Device, build: &dyn Fn(&Device) -> Result<M>) -> Result<Self> {
+    fn start(
+        run_dir: &Path,
+        cfg: &RotestConfig,
+        device: &Device,
+        build: &dyn Fn(&Device) -> Result<M>,
+    ) -> Result<Self> {
         let train_device = device.clone().autodiff();
         let Some(dir) = resume::find(run_dir) else {
             return Ok(Progress::new(build(&train_device)?, cfg));
@@ -635,7 +640,7 @@ impl<M: Classifier> Progress<M> {
 /// Adam with the run's learning rate and burn's `epsilon` of 1e-5, which every run of this
 /// experiment so far trained with (before it shared the SAC learner's optimiser; PyTorch's default,
 /// and the authors', is 1e-8).
-fn adam_params(cfg: &TrainConfig) -> AdamParams {
+fn adam_params(cfg: &RotestConfig) -> AdamParams {
     AdamParams { eps: 1e-5, ..AdamParams::new(cfg.lr) }
 }
 
@@ -652,7 +657,7 @@ enum Fitted<M> {
 #[allow(clippy::too_many_arguments)]
 fn fit<M: Classifier>(
     mut p: Progress<M>,
-    cfg: &TrainConfig,
+    cfg: &RotestConfig,
     train: &Samples,
     val: &Samples,
     test: &Samples,
@@ -738,7 +743,7 @@ fn fit<M: Classifier>(
 /// in `out` if there is one, and saves its best weights to `out/best.safetensors` when it finishes.
 fn train_net<M: Classifier>(
     build: &dyn Fn(&Device) -> Result<M>,
-    cfg: &TrainConfig,
+    cfg: &RotestConfig,
     [train, val, test]: [&Samples; 3],
     device: &Device,
     out: &Path,
@@ -756,7 +761,7 @@ fn train_net<M: Classifier>(
 }
 
 /// Builds the network of `cfg` on `device`.
-fn net_config(cfg: &TrainConfig) -> NetConfig {
+fn net_config(cfg: &RotestConfig) -> NetConfig {
     NetConfig::new(cfg.hidden, cfg.input, CHANNELS).with_numerics(Numerics::kernels(cfg.matmul))
 }
 
@@ -767,11 +772,11 @@ fn net_config(cfg: &TrainConfig) -> NetConfig {
 /// one, and writes none ([`run_with`] does).
 pub fn run(
     ds: &Dataset,
-    cfg: &TrainConfig,
+    cfg: &RotestConfig,
     device: &Device,
     out: &Path,
     on_epoch: &mut dyn FnMut(&EpochRecord),
-) -> Result<RunRecord> {
+) -> Result<RotestRecord> {
     match run_with(ds, cfg, device, out, None, on_epoch)? {
         Outcome::Finished(r) => Ok(r),
         Outcome::Stopped { .. } => unreachable!("a run without checkpoints does not stop"),
@@ -784,7 +789,7 @@ pub fn run(
 /// ([`RotestError::Busy`]).
 pub fn run_with(
     ds: &Dataset,
-    cfg: &TrainConfig,
+    cfg: &RotestConfig,
     device: &Device,
     out: &Path,
     ckpt: Option<&Checkpointing>,
@@ -811,10 +816,10 @@ pub fn run_with(
     let ncfg = net_config(cfg);
     let splits = [&train, &val, &test];
     let fitted = match cfg.model {
-        ModelKind::Equi => {
+        ClassifierKind::Equi => {
             train_net(&|d| Ok(RotEquiNet::new(&ncfg, &init, d)?), cfg, splits, device, out, ckpt, on_epoch)?
         }
-        ModelKind::Cnn => {
+        ClassifierKind::Cnn => {
             train_net(&|d| Ok(RotCnnNet::new(&ncfg, &init, d)?), cfg, splits, device, out, ckpt, on_epoch)?
         }
     };
@@ -827,7 +832,7 @@ pub fn run_with(
         .fold(None::<&EpochRecord>, |b, e| if b.is_none_or(|b| e.val_acc > b.val_acc) { Some(e) } else { b });
     let (best_epoch, best_val_acc, test_acc) =
         best.map_or((0, 0.0, 0.0), |b| (b.epoch, b.val_acc, b.test_acc.unwrap_or(f64::NAN)));
-    let record = RunRecord {
+    let record = RotestRecord {
         config: cfg.clone(),
         corrupt: ds.header.corrupt.clone(),
         data_seed: ds.header.seed,

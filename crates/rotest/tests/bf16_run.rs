@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use equiarm_nn::burn::tensor::Device;
 use equiarm_nn::kernels::MatmulPrecision;
-use equiarm_rotest::train::{self, ModelKind, RunRecord, TrainConfig};
+use equiarm_rotest::train::{self, ClassifierKind, RotestConfig, RotestRecord};
 use equiarm_sim::rotest::{Corruptions, PairConfig};
 
 fn scratch(name: &str) -> PathBuf {
@@ -24,7 +24,7 @@ fn a_bf16_run_trains_records_its_precision_and_follows_f32() {
         5,
     )
     .unwrap();
-    let base = TrainConfig {
+    let base = RotestConfig {
         hidden: 8,
         input: 16,
         val_pairs: 4,
@@ -33,12 +33,12 @@ fn a_bf16_run_trains_records_its_precision_and_follows_f32() {
         min_epochs: 2,
         max_epochs: 2,
         lr: 1e-3,
-        ..TrainConfig::paper(ModelKind::Equi, 16, 0)
+        ..RotestConfig::paper(ClassifierKind::Equi, 16, 0)
     };
-    let bf16 = TrainConfig { matmul: MatmulPrecision::Bf16, ..base.clone() };
+    let bf16 = RotestConfig { matmul: MatmulPrecision::Bf16, ..base.clone() };
     // The config is valid anywhere; the run checks the machine.
     bf16.validate().unwrap();
-    let run = |cfg: &TrainConfig, name: &str| train::run(&ds, cfg, &Device::flex(), &scratch(name), &mut |_| {});
+    let run = |cfg: &RotestConfig, name: &str| train::run(&ds, cfg, &Device::flex(), &scratch(name), &mut |_| {});
     if MatmulPrecision::Bf16.supported().is_err() {
         let e = run(&bf16, "refused").unwrap_err().to_string();
         assert!(e.contains("--matmul") && e.contains("AMX"), "{e}");
@@ -47,7 +47,7 @@ fn a_bf16_run_trains_records_its_precision_and_follows_f32() {
     }
     let exact = run(&base, "f32").unwrap();
     let rounded = run(&bf16, "bf16").unwrap();
-    let saved: RunRecord =
+    let saved: RotestRecord =
         serde_json::from_slice(&std::fs::read(scratch_path("bf16").join("run.json")).unwrap()).unwrap();
     assert_eq!(saved.config.matmul, MatmulPrecision::Bf16);
     assert!(rounded.history.iter().all(|e| e.loss.is_finite()));

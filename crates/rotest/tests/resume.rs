@@ -13,7 +13,7 @@ use equiarm_rotest::RotestError;
 use equiarm_rotest::dataset::Dataset;
 use equiarm_rotest::generate::generate;
 use equiarm_rotest::resume::{RESUME_DIR, read_state};
-use equiarm_rotest::train::{self, Checkpointing, ModelKind, Outcome, RunRecord, TrainConfig};
+use equiarm_rotest::train::{self, Checkpointing, ClassifierKind, Outcome, RotestConfig, RotestRecord};
 use equiarm_sim::rotest::{Corruptions, PairConfig};
 
 fn scratch(name: &str) -> PathBuf {
@@ -29,12 +29,12 @@ fn data(pairs: usize, seed: u64) -> Dataset {
 }
 
 /// The tests' net on 16 px random crops of 19 px images, 6 epochs of 12 pairs.
-fn tiny(model: ModelKind) -> TrainConfig {
-    TrainConfig { lr: 1e-3, min_epochs: 6, max_epochs: 6, ..common::tiny(model, 12, 3) }
+fn tiny(model: ClassifierKind) -> RotestConfig {
+    RotestConfig { lr: 1e-3, min_epochs: 6, max_epochs: 6, ..common::tiny(model, 12, 3) }
 }
 
 /// The record without the wall times, which differ between any two runs.
-fn timeless(mut r: RunRecord) -> RunRecord {
+fn timeless(mut r: RotestRecord) -> RotestRecord {
     for e in &mut r.history {
         e.seconds = 0.0;
     }
@@ -42,7 +42,7 @@ fn timeless(mut r: RunRecord) -> RunRecord {
 }
 
 /// Stops `cfg`'s run in `dir` after `after` epochs (a checkpoint after every epoch).
-fn stop_after(ds: &Dataset, cfg: &TrainConfig, dir: &Path, after: usize) -> Outcome {
+fn stop_after(ds: &Dataset, cfg: &RotestConfig, dir: &Path, after: usize) -> Outcome {
     let asked = std::cell::Cell::new(0);
     let stop = || {
         asked.set(asked.get() + 1);
@@ -55,7 +55,7 @@ fn stop_after(ds: &Dataset, cfg: &TrainConfig, dir: &Path, after: usize) -> Outc
 #[test]
 fn a_run_stopped_and_continued_ends_exactly_as_the_run_trained_straight() {
     let ds = data(20, 11);
-    for model in [ModelKind::Cnn, ModelKind::Equi] {
+    for model in [ClassifierKind::Cnn, ClassifierKind::Equi] {
         let cfg = tiny(model);
         let straight = scratch(&format!("straight_{model:?}"));
         let whole = train::run(&ds, &cfg, &Device::flex(), &straight, &mut |_| {}).unwrap();
@@ -82,10 +82,10 @@ fn a_run_stopped_and_continued_ends_exactly_as_the_run_trained_straight() {
 #[test]
 fn a_checkpoint_of_another_configuration_or_a_damaged_one_is_refused_naming_it() {
     let ds = data(20, 12);
-    let cfg = tiny(ModelKind::Cnn);
+    let cfg = tiny(ClassifierKind::Cnn);
     let dir = scratch("refused");
     assert_eq!(stop_after(&ds, &cfg, &dir, 1), Outcome::Stopped { epoch: 1 });
-    let other = TrainConfig { lr: 2e-3, ..cfg.clone() };
+    let other = RotestConfig { lr: 2e-3, ..cfg.clone() };
     let e = train::run(&ds, &other, &Device::flex(), &dir, &mut |_| {}).unwrap_err().to_string();
     assert!(e.contains(RESUME_DIR) && e.contains("another configuration") && e.contains("lr 0.001"), "{e}");
 
@@ -106,7 +106,7 @@ fn a_checkpoint_of_another_configuration_or_a_damaged_one_is_refused_naming_it()
 #[test]
 fn a_checkpoint_whose_optimiser_state_is_damaged_or_from_before_is_refused_naming_the_file() {
     let ds = data(20, 12);
-    let cfg = tiny(ModelKind::Cnn);
+    let cfg = tiny(ClassifierKind::Cnn);
     let dir = scratch("optimiser");
     assert_eq!(stop_after(&ds, &cfg, &dir, 1), Outcome::Stopped { epoch: 1 });
     let adam = dir.join(RESUME_DIR).join("adam.safetensors");
@@ -126,11 +126,11 @@ fn a_run_directory_another_process_trains_in_is_refused() {
     let ds = data(20, 13);
     let dir = scratch("busy");
     let claim = equiarm_train::rundir::RunDirLock::acquire(&dir).unwrap();
-    let e = train::run(&ds, &tiny(ModelKind::Cnn), &Device::flex(), &dir, &mut |_| {}).unwrap_err();
+    let e = train::run(&ds, &tiny(ClassifierKind::Cnn), &Device::flex(), &dir, &mut |_| {}).unwrap_err();
     assert!(matches!(e, RotestError::Busy { .. }), "{e}");
     assert!(e.to_string().contains("another process is training"), "{e}");
     drop(claim);
-    assert!(train::run(&ds, &tiny(ModelKind::Cnn), &Device::flex(), &dir, &mut |_| {}).is_ok());
+    assert!(train::run(&ds, &tiny(ClassifierKind::Cnn), &Device::flex(), &dir, &mut |_| {}).is_ok());
 }
 
 /// The grid stopped in the middle of a run: that run keeps a checkpoint, `rotest status` says
@@ -138,11 +138,11 @@ fn a_run_directory_another_process_trains_in_is_refused() {
 /// (which `rotest status` says is in training now).
 #[test]
 fn a_grid_stopped_inside_a_run_continues_it_from_its_checkpoint() {
-    use equiarm_rotest::cli::{RotestCommand, Variant, run};
+    use equiarm_rotest::cli::{ClassifierVariant, RotestCommand, run};
     use equiarm_rotest::grid::status;
     let root = scratch("grid");
     data(12, 7).write(&root.join("data").join("none")).unwrap();
-    let args = common::grid_args(&root, vec![Variant::Cnn], vec![0, 1], 4);
+    let args = common::grid_args(&root, vec![ClassifierVariant::Cnn], vec![0, 1], 4);
     let seed_dir = |s: u64| root.join("runs").join("none").join("cnn").join("4").join(format!("s{s}"));
     // asked before the dataset and before seed 0, then after seed 0's epochs 1 and 2: stop there
     let asked = std::cell::Cell::new(0);
@@ -161,7 +161,7 @@ fn a_grid_stopped_inside_a_run_continues_it_from_its_checkpoint() {
     let text = status(&args).unwrap();
     assert!(text.contains(&format!("in training now: {}\n", seed_dir(1).display())), "{text}");
     assert_eq!(run(RotestCommand::Grid(args.clone()), &|| false).unwrap(), 0);
-    let rec: RunRecord = serde_json::from_slice(&std::fs::read(seed_dir(0).join("run.json")).unwrap()).unwrap();
+    let rec: RotestRecord = serde_json::from_slice(&std::fs::read(seed_dir(0).join("run.json")).unwrap()).unwrap();
     assert_eq!(rec.history.iter().map(|e| e.epoch).collect::<Vec<_>>(), [1, 2, 3, 4]);
     assert!(!seed_dir(1).join("run.json").exists());
     drop(claim);

@@ -14,7 +14,7 @@ use equiarm_rotest::RotestError;
 use equiarm_rotest::bound::dataset_bound;
 use equiarm_rotest::dataset::{Dataset, FILE_NAME};
 use equiarm_rotest::generate::generate;
-use equiarm_rotest::train::{self, Classifier, ModelKind, Samples, TrainConfig, rotate};
+use equiarm_rotest::train::{self, Classifier, ClassifierKind, RotestConfig, Samples, rotate};
 use equiarm_sim::rotest::{Corruptions, PairConfig};
 
 fn scratch(name: &str) -> PathBuf {
@@ -82,14 +82,14 @@ fn the_bound_is_0_625_on_invert_label_and_1_on_clean_data() {
 
 #[test]
 fn training_options_out_of_their_domain_name_the_flag() {
-    let mut c = TrainConfig::paper(ModelKind::Cnn, 10, 0);
+    let mut c = RotestConfig::paper(ClassifierKind::Cnn, 10, 0);
     c.img_trans = 11;
     assert!(c.validate().unwrap_err().to_string().contains("--img-trans"));
-    let c = TrainConfig { input: 48, ..TrainConfig::paper(ModelKind::Cnn, 10, 0) };
+    let c = RotestConfig { input: 48, ..RotestConfig::paper(ClassifierKind::Cnn, 10, 0) };
     assert!(c.validate().unwrap_err().to_string().contains("--input"));
-    let c = TrainConfig::paper(ModelKind::Cnn, 1700, 0);
+    let c = RotestConfig::paper(ClassifierKind::Cnn, 1700, 0);
     assert!(train::split(2000, &c).unwrap_err().to_string().contains("--train-pairs"));
-    let [a, b, t] = train::split(2000, &TrainConfig::paper(ModelKind::Cnn, 100, 0)).unwrap();
+    let [a, b, t] = train::split(2000, &RotestConfig::paper(ClassifierKind::Cnn, 100, 0)).unwrap();
     assert_eq!((a.len(), b.len(), t.len()), (100, 200, 200));
     let mut all: Vec<usize> = a.iter().chain(&b).chain(&t).copied().collect();
     all.sort();
@@ -146,11 +146,11 @@ use common::tiny;
 fn a_trained_c8_net_predicts_the_same_class_for_both_images_rotated_by_90_degrees() {
     let ds = data("none", 19, 24, 5);
     let out = scratch("train_equi");
-    let cfg = TrainConfig { min_epochs: 2, max_epochs: 2, lr: 1e-3, ..tiny(ModelKind::Equi, 16, 0) };
+    let cfg = RotestConfig { min_epochs: 2, max_epochs: 2, lr: 1e-3, ..tiny(ClassifierKind::Equi, 16, 0) };
     let rec = train::run(&ds, &cfg, &Device::flex(), &out, &mut |_| {}).unwrap();
     assert_eq!(rec.history.len(), 2);
     assert!(rec.history.iter().all(|e| e.loss.is_finite()));
-    let saved: train::RunRecord = serde_json::from_slice(&std::fs::read(out.join("run.json")).unwrap()).unwrap();
+    let saved: train::RotestRecord = serde_json::from_slice(&std::fs::read(out.join("run.json")).unwrap()).unwrap();
     assert_eq!(saved, rec);
 
     let dev = Device::flex();
@@ -211,7 +211,8 @@ fn a_trained_c8_net_predicts_the_same_class_for_both_images_rotated_by_90_degree
 fn early_stopping_waits_for_patience_after_min_epochs_and_reports_the_best_epoch() {
     let ds = data("none", 19, 16, 6);
     for (min_epochs, expect) in [(2, 3), (5, 5)] {
-        let cfg = TrainConfig { lr: 1e-12, min_epochs, patience: 2, max_epochs: 50, ..tiny(ModelKind::Cnn, 8, 1) };
+        let cfg =
+            RotestConfig { lr: 1e-12, min_epochs, patience: 2, max_epochs: 50, ..tiny(ClassifierKind::Cnn, 8, 1) };
         let rec = train::run(&ds, &cfg, &Device::flex(), &scratch(&format!("stop{min_epochs}")), &mut |_| {}).unwrap();
         assert_eq!(rec.history.len(), expect, "min_epochs {min_epochs}");
         assert!(rec.history.iter().all(|e| e.val_acc == rec.history[0].val_acc));
@@ -225,7 +226,7 @@ fn early_stopping_waits_for_patience_after_min_epochs_and_reports_the_best_epoch
 /// report into `root/report`.
 fn tiny_grid(
     root: &std::path::Path,
-    variants: Vec<equiarm_rotest::cli::Variant>,
+    variants: Vec<equiarm_rotest::cli::ClassifierVariant>,
     seeds: Vec<u64>,
 ) -> equiarm_rotest::cli::RotestCommand {
     equiarm_rotest::cli::RotestCommand::Grid(grid_args(root, variants, seeds))
@@ -234,7 +235,7 @@ fn tiny_grid(
 /// The options of [`tiny_grid`] (what `rotest status` takes too): one epoch a run.
 fn grid_args(
     root: &std::path::Path,
-    variants: Vec<equiarm_rotest::cli::Variant>,
+    variants: Vec<equiarm_rotest::cli::ClassifierVariant>,
     seeds: Vec<u64>,
 ) -> equiarm_rotest::grid::GridArgs {
     common::grid_args(root, variants, seeds, 1)
@@ -244,11 +245,11 @@ fn grid_args(
 /// second time; an empty list of variants is refused naming the flag.
 #[test]
 fn the_grid_trains_only_the_variants_named_and_skips_finished_runs() {
-    use equiarm_rotest::cli::{Variant, run};
+    use equiarm_rotest::cli::{ClassifierVariant, run};
     let root = scratch("grid_variants");
     data("none", 19, 12, 7).write(&root.join("data").join("none")).unwrap();
-    let grid = |variants: Vec<Variant>| tiny_grid(&root, variants, vec![0]);
-    assert_eq!(run(grid(vec![Variant::Cnn]), &|| false).unwrap(), 0);
+    let grid = |variants: Vec<ClassifierVariant>| tiny_grid(&root, variants, vec![0]);
+    assert_eq!(run(grid(vec![ClassifierVariant::Cnn]), &|| false).unwrap(), 0);
     let runs = root.join("runs").join("none");
     let cnn = runs.join("cnn").join("4").join("s0").join("run.json");
     assert!(cnn.is_file());
@@ -256,7 +257,7 @@ fn the_grid_trains_only_the_variants_named_and_skips_finished_runs() {
     let table = std::fs::read_to_string(root.join("report").join("rotest.md")).unwrap();
     assert!(table.contains("| none | 4 |"), "{table}");
     let written = std::fs::metadata(&cnn).unwrap().modified().unwrap();
-    run(grid(vec![Variant::Cnn]), &|| false).unwrap();
+    run(grid(vec![ClassifierVariant::Cnn]), &|| false).unwrap();
     assert_eq!(std::fs::metadata(&cnn).unwrap().modified().unwrap(), written, "a finished run was trained again");
     let err = run(grid(vec![]), &|| false).unwrap_err().to_string();
     assert!(err.contains("--variants"), "{err}");
@@ -268,7 +269,7 @@ fn the_grid_trains_only_the_variants_named_and_skips_finished_runs() {
 /// here, unfinished (a directory without `run.json`), not started, or archived in the report.
 #[test]
 fn a_stopped_grid_keeps_its_finished_runs_and_the_same_command_continues() {
-    use equiarm_rotest::cli::{Variant, run};
+    use equiarm_rotest::cli::{ClassifierVariant, run};
     use equiarm_rotest::grid::status;
     use equiarm_train::STOPPED_EXIT;
     let root = scratch("grid_stop");
@@ -280,7 +281,7 @@ fn a_stopped_grid_keeps_its_finished_runs_and_the_same_command_continues() {
         asked.set(asked.get() + 1);
         seed_dir(0).join("run.json").is_file()
     };
-    let grid = || tiny_grid(&root, vec![Variant::Cnn], vec![0, 1, 2]);
+    let grid = || tiny_grid(&root, vec![ClassifierVariant::Cnn], vec![0, 1, 2]);
     assert_eq!(run(grid(), &stop).unwrap(), STOPPED_EXIT);
     // asked before the setting's dataset, before seed 0 and before seed 1
     assert_eq!(asked.get(), 3);
@@ -288,7 +289,7 @@ fn a_stopped_grid_keeps_its_finished_runs_and_the_same_command_continues() {
     assert!(!seed_dir(1).exists() && !seed_dir(2).exists(), "a run was started after the stop");
     assert!(!root.join("report").exists(), "a stopped grid wrote a report");
     std::fs::create_dir_all(seed_dir(1)).unwrap();
-    let args = grid_args(&root, vec![Variant::Cnn], vec![0, 1, 2]);
+    let args = grid_args(&root, vec![ClassifierVariant::Cnn], vec![0, 1, 2]);
     let text = status(&args).unwrap();
     assert!(text.contains("none: 1 finished here, 0 archived in "), "{text}");
     assert!(text.contains(", 1 unfinished (cut short, or in training now), 1 not started\n"), "{text}");

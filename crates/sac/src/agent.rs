@@ -168,67 +168,69 @@ impl AgentConfig {
     }
 }
 
-/// One training batch, already cropped: `obs` holds `m` copies of the `b` rows (copy `j` of row
-/// `i` at index `j·b + i`), each `5 × s × s` (docs/paper.md §1.1 channels); `next_obs` holds `k`
-/// copies. Actions are normalised to [−1, 1], order (p, dx, dy, dz, dθ).
+/// One training batch, already cropped: `obs` holds `obs_copies` copies of the `rows` transitions
+/// (copy `j` of row `i` at index `j·rows + i`), each an image of [`OBS_PLANES`] × `size` × `size`
+/// (docs/paper.md §1.1 channels); `next_obs` holds `next_copies` copies. Actions are normalised to
+/// [−1, 1], [`ACTION_DIM`] values in the order (p, dx, dy, dz, dθ).
 #[derive(Clone, Debug, Default)]
 pub struct Batch {
-    /// Rows.
-    pub b: usize,
-    /// Image size.
-    pub s: usize,
-    /// Copies of obs (DrQ M; 1 for RAD).
-    pub m: usize,
-    /// Copies of next_obs (DrQ K; 1 for RAD).
-    pub k: usize,
-    /// `[m·b, 5, s, s]`.
+    /// Transitions (B).
+    pub rows: usize,
+    /// Image side in pixels (S).
+    pub size: usize,
+    /// Copies of each observation (DrQ's M; 1 for RAD).
+    pub obs_copies: usize,
+    /// Copies of each next observation (DrQ's K; 1 for RAD).
+    pub next_copies: usize,
+    /// `[obs_copies·rows, OBS_PLANES, size, size]`.
     pub obs: Vec<f32>,
-    /// `[k·b, 5, s, s]`.
+    /// `[next_copies·rows, OBS_PLANES, size, size]`.
     pub next_obs: Vec<f32>,
-    /// `[b, 5]`.
+    /// `[rows, ACTION_DIM]`.
     pub action: Vec<f32>,
-    /// `[b]`.
+    /// `[rows]`.
     pub reward: Vec<f32>,
-    /// `[b]`: 0 where the bootstrap is cut (terminal), else 1.
+    /// `[rows]`: 0 where the bootstrap is cut (terminal), else 1.
     pub mask: Vec<f32>,
-    /// `[b]`: 1 for expert rows.
+    /// `[rows]`: 1 for expert rows.
     pub expert: Vec<f32>,
-    /// `[b]`: PER importance weights (used only with `use_is_weights`).
+    /// `[rows]`: PER importance weights (used only with `use_is_weights`).
     pub weight: Vec<f32>,
     /// FERM: the contrastive step's anchor and positive, two more independent crops of each obs,
-    /// `[b, 5, s, s]` each.
+    /// `[rows, OBS_PLANES, size, size]` each.
     pub curl: Option<(Vec<f32>, Vec<f32>)>,
 }
 
 impl Batch {
     fn check(&self) -> Result<(), AgentError> {
-        let plane = 5 * self.s * self.s;
+        let (b, m, k) = (self.rows, self.obs_copies, self.next_copies);
+        let plane = OBS_PLANES * self.size * self.size;
         let bad = |what: &str, got: usize, want: usize| {
             Err(AgentError::Batch(format!("{what} has {got} values, expected {want}")))
         };
-        if self.b == 0 || self.m == 0 || self.k == 0 {
-            return Err(AgentError::Batch(format!("empty batch (b {}, m {}, k {})", self.b, self.m, self.k)));
+        if b == 0 || m == 0 || k == 0 {
+            return Err(AgentError::Batch(format!("empty batch ({b} rows, {m} observation copies, {k} next copies)")));
         }
-        if self.obs.len() != self.m * self.b * plane {
-            return bad("obs", self.obs.len(), self.m * self.b * plane);
+        if self.obs.len() != m * b * plane {
+            return bad("obs", self.obs.len(), m * b * plane);
         }
-        if self.next_obs.len() != self.k * self.b * plane {
-            return bad("next_obs", self.next_obs.len(), self.k * self.b * plane);
+        if self.next_obs.len() != k * b * plane {
+            return bad("next_obs", self.next_obs.len(), k * b * plane);
         }
-        if self.action.len() != 5 * self.b {
-            return bad("action", self.action.len(), 5 * self.b);
+        if self.action.len() != ACTION_DIM * b {
+            return bad("action", self.action.len(), ACTION_DIM * b);
         }
         for (what, v) in
             [("reward", &self.reward), ("mask", &self.mask), ("expert", &self.expert), ("weight", &self.weight)]
         {
-            if v.len() != self.b {
-                return bad(what, v.len(), self.b);
+            if v.len() != b {
+                return bad(what, v.len(), b);
             }
         }
         if let Some((a, p)) = &self.curl {
             for (what, v) in [("curl anchor", a), ("curl positive", p)] {
-                if v.len() != self.b * plane {
-                    return bad(what, v.len(), self.b * plane);
+                if v.len() != b * plane {
+                    return bad(what, v.len(), b * plane);
                 }
             }
         }
@@ -498,15 +500,15 @@ impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
         self.curl.as_ref().map_or(0, |c| c.steps)
     }
 
-    /// FERM: one contrastive (CURL) step on `b` anchor and positive crops `[b, 5, s, s]` (two
+    /// FERM: one contrastive (CURL) step on `b` anchor and positive crops `[b, OBS_PLANES, s, s]` (two
     /// independent crops of the same observations): anchor features from the online critic's
     /// encoder, positive features from the target encoder (no gradient); the loss updates `W` and the
     /// critic's encoder. Returns the loss. An error for a model without a contrastive part.
     pub fn curl_step(&mut self, anchor: Vec<f32>, positive: Vec<f32>, b: usize) -> Result<f32, AgentError> {
         let s = self.cfg.input_size;
-        if anchor.len() != b * 5 * s * s || positive.len() != anchor.len() || b == 0 {
+        if anchor.len() != b * OBS_PLANES * s * s || positive.len() != anchor.len() || b == 0 {
             return Err(AgentError::Batch(format!(
-                "curl: {} and {} values for {b} crops of 5×{s}×{s}",
+                "curl: {} and {} values for {b} crops of {OBS_PLANES}×{s}×{s}",
                 anchor.len(),
                 positive.len()
             )));
@@ -518,8 +520,8 @@ impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
                 self.cfg.model.name()
             )));
         };
-        let xa = Tensor::<4>::from_data(TensorData::new(anchor, [b, 5, s, s]), &dev);
-        let xp = Tensor::<4>::from_data(TensorData::new(positive, [b, 5, s, s]), &plain);
+        let xa = Tensor::<4>::from_data(TensorData::new(anchor, [b, OBS_PLANES, s, s]), &dev);
+        let xp = Tensor::<4>::from_data(TensorData::new(positive, [b, OBS_PLANES, s, s]), &plain);
         let (Some(za), Some(zp)) = (self.critic.features(xa), self.target.features(xp)) else {
             return Err(AgentError::Batch("curl: the critic has no encoder features".into()));
         };
@@ -554,11 +556,11 @@ impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
     }
 
     fn image(&self, data: &[f32], n: usize, s: usize, device: &Device) -> Tensor<4> {
-        Tensor::from_data(TensorData::new(data.to_vec(), [n, 5, s, s]), device)
+        Tensor::from_data(TensorData::new(data.to_vec(), [n, OBS_PLANES, s, s]), device)
     }
 
-    /// Actions `[n, 5]` (normalised, in [−1, 1]) for `n` observations `[n, 5, s, s]`; `noise` is
-    /// used in `Sample` mode (`[n, 5]` standard normals; drawn from the agent's RNG when `None`).
+    /// Actions `[n, ACTION_DIM]` (normalised, in [−1, 1]) for `n` observations `[n, OBS_PLANES, s, s]`; `noise` is
+    /// used in `Sample` mode (`[n, ACTION_DIM]` standard normals; drawn from the agent's RNG when `None`).
     pub fn act(
         &mut self,
         obs: &[f32],
@@ -567,16 +569,19 @@ impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
         noise: Option<&[f32]>,
     ) -> Result<Vec<NormalizedAction>, AgentError> {
         let s = self.cfg.input_size;
-        if obs.len() != n * 5 * s * s || n == 0 {
-            return Err(AgentError::Batch(format!("act: {} values for {n} observations of 5×{s}×{s}", obs.len())));
+        if obs.len() != n * OBS_PLANES * s * s || n == 0 {
+            return Err(AgentError::Batch(format!(
+                "act: {} values for {n} observations of {OBS_PLANES}×{s}×{s}",
+                obs.len()
+            )));
         }
         let eps = match (mode, noise) {
             (ActMode::Greedy, _) => None,
-            (ActMode::Sample, Some(e)) if e.len() == n * 5 => Some(e.to_vec()),
+            (ActMode::Sample, Some(e)) if e.len() == n * ACTION_DIM => Some(e.to_vec()),
             (ActMode::Sample, Some(e)) => {
                 return Err(AgentError::Batch(format!("act: {} noise values for {n} actions", e.len())));
             }
-            (ActMode::Sample, None) => Some(self.normal(n * 5)),
+            (ActMode::Sample, None) => Some(self.normal(n * ACTION_DIM)),
         };
         if self.inference.is_none() {
             self.inference = Some(self.actor.for_inference());
@@ -587,10 +592,10 @@ impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
         let (mean, log_std) = actor.forward(x);
         let a = match eps {
             None => mean.tanh(),
-            Some(e) => gaussian_sample(mean, log_std, Tensor::from_data(TensorData::new(e, [n, 5]), &plain)).0,
+            Some(e) => gaussian_sample(mean, log_std, Tensor::from_data(TensorData::new(e, [n, ACTION_DIM]), &plain)).0,
         };
         let v = a.into_data().try_into_vec::<f32>().map_err(|e| AgentError::Batch(format!("act: {e:?}")))?;
-        Ok(v.chunks_exact(5).map(|c| [c[0], c[1], c[2], c[3], c[4]]).collect())
+        Ok(v.chunks_exact(ACTION_DIM).map(|c| [c[0], c[1], c[2], c[3], c[4]]).collect())
     }
 
     /// One SAC update (critic → actor → α → target) on `batch`, which it consumes (its images
@@ -598,7 +603,7 @@ impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
     /// over the M copies), for PER priorities.
     pub fn update(&mut self, mut batch: Batch) -> Result<(Metrics, Vec<f32>), AgentError> {
         batch.check()?;
-        let (b, s, m, k) = (batch.b, batch.s, batch.m, batch.k);
+        let (b, s, m, k) = (batch.rows, batch.size, batch.obs_copies, batch.next_copies);
         if s != self.cfg.input_size {
             return Err(AgentError::Batch(format!("images are {s} px, the networks take {}", self.cfg.input_size)));
         }
@@ -612,13 +617,15 @@ impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
 
         // --- critic target (no gradients): mean over the K next-observation crops.
         // The images move into the tensors (no copy of the batch's largest arrays).
-        let next =
-            Tensor::<4>::from_data(TensorData::new(std::mem::take(&mut batch.next_obs), [k * b, 5, s, s]), &plain);
-        let eps_next = self.normal(k * b * 5);
+        let next = Tensor::<4>::from_data(
+            TensorData::new(std::mem::take(&mut batch.next_obs), [k * b, OBS_PLANES, s, s]),
+            &plain,
+        );
+        let eps_next = self.normal(k * b * ACTION_DIM);
         let actor_plain = self.actor.valid();
         let (mn, ls) = actor_plain.forward(next.clone());
         let (a_next, logp_next, _) =
-            gaussian_sample(mn, ls, Tensor::from_data(TensorData::new(eps_next, [k * b, 5]), &plain));
+            gaussian_sample(mn, ls, Tensor::from_data(TensorData::new(eps_next, [k * b, ACTION_DIM]), &plain));
         let (q1t, q2t) = self.target.forward(next, a_next);
         let reward = col(&repeat(&batch.reward, k), k * b, &plain);
         let mask = col(&repeat(&batch.mask, k), k * b, &plain);
@@ -626,8 +633,9 @@ impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
         let y_m: Tensor<2> = Tensor::cat(vec![y; m], 0); // [m·b, 1]
 
         // --- critic step on the M observation crops.
-        let obs = Tensor::<4>::from_data(TensorData::new(std::mem::take(&mut batch.obs), [m * b, 5, s, s]), &dev);
-        let action = Tensor::<2>::from_data(TensorData::new(repeat(&batch.action, m), [m * b, 5]), &dev);
+        let obs =
+            Tensor::<4>::from_data(TensorData::new(std::mem::take(&mut batch.obs), [m * b, OBS_PLANES, s, s]), &dev);
+        let action = Tensor::<2>::from_data(TensorData::new(repeat(&batch.action, m), [m * b, ACTION_DIM]), &dev);
         let (q1, q2) = self.critic.forward(obs.clone(), action);
         let y_ad = Tensor::from_inner(y_m.clone());
         let d1 = q1.clone() - y_ad.clone();
@@ -649,9 +657,10 @@ impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
         self.actor = self.actor.clone().tie(&self.critic);
 
         // --- actor step (critic weights fixed) on the same M crops, expert L2 on the sampled action.
-        let eps = self.normal(m * b * 5);
+        let eps = self.normal(m * b * ACTION_DIM);
         let (mean, log_std) = self.actor.forward(obs.clone());
-        let (a, logp, _) = gaussian_sample(mean, log_std, Tensor::from_data(TensorData::new(eps, [m * b, 5]), &dev));
+        let (a, logp, _) =
+            gaussian_sample(mean, log_std, Tensor::from_data(TensorData::new(eps, [m * b, ACTION_DIM]), &dev));
         let frozen = self.critic.clone().no_grad();
         let (q1a, q2a) = frozen.forward(obs, a.clone());
         let mut actor_loss = (logp.clone().mul_scalar(alpha) - q1a.min_pair(q2a)).mean();
@@ -659,9 +668,9 @@ impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
         let mut expert_loss = 0.0;
         if n_expert > 0 && self.cfg.expert_weight != 0.0 {
             let e = Tensor::from_inner(col(&repeat(&batch.expert, m), m * b, &plain));
-            let target_a = Tensor::<2>::from_data(TensorData::new(repeat(&batch.action, m), [m * b, 5]), &dev);
+            let target_a = Tensor::<2>::from_data(TensorData::new(repeat(&batch.action, m), [m * b, ACTION_DIM]), &dev);
             let se = (a - target_a).powf_scalar(2.0) * e;
-            let l = se.sum().div_scalar((m * n_expert * 5) as f64);
+            let l = se.sum().div_scalar((m * n_expert * ACTION_DIM) as f64);
             expert_loss = scalar(l.clone().inner());
             actor_loss = actor_loss + l.mul_scalar(self.cfg.expert_weight);
         }
@@ -1054,13 +1063,13 @@ mod tests {
     fn batch(b: usize, s: usize, seed: u64) -> Batch {
         let mut rng = crate::rng::stream(seed, 9);
         Batch {
-            b,
-            s,
-            m: 1,
-            k: 1,
-            obs: crate::rng::normals(&mut rng, b * 5 * s * s),
-            next_obs: crate::rng::normals(&mut rng, b * 5 * s * s),
-            action: crate::rng::normals(&mut rng, b * 5).iter().map(|x| x.tanh()).collect(),
+            rows: b,
+            size: s,
+            obs_copies: 1,
+            next_copies: 1,
+            obs: crate::rng::normals(&mut rng, b * OBS_PLANES * s * s),
+            next_obs: crate::rng::normals(&mut rng, b * OBS_PLANES * s * s),
+            action: crate::rng::normals(&mut rng, b * ACTION_DIM).iter().map(|x| x.tanh()).collect(),
             reward: (0..b).map(|i| (i % 2) as f32).collect(),
             mask: vec![1.0; b],
             expert: (0..b).map(|i| (i % 3 == 0) as u8 as f32).collect(),
@@ -1080,7 +1089,7 @@ mod tests {
     /// [`batch`] with FERM's contrastive crops.
     fn ferm_batch(b: usize, s: usize, seed: u64) -> Batch {
         let mut rng = crate::rng::stream(seed, 10);
-        let n = b * 5 * s * s;
+        let n = b * OBS_PLANES * s * s;
         Batch { curl: Some((crate::rng::normals(&mut rng, n), crate::rng::normals(&mut rng, n))), ..batch(b, s, seed) }
     }
 

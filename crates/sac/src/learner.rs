@@ -311,7 +311,20 @@ impl Learner {
         let mask = rows.iter().map(|r| if r.done { 0.0 } else { 1.0 }).collect();
         let expert = rows.iter().map(|r| if r.expert { 1.0 } else { 0.0 }).collect();
         let curl = if self.cfg.agent.model == ModelKind::Ferm { Some(self.curl_crops(slots)?) } else { None };
-        Ok(Batch { b, s, m, k, obs, next_obs, action, reward, mask, expert, weight: weights.to_vec(), curl })
+        Ok(Batch {
+            rows: b,
+            size: s,
+            obs_copies: m,
+            next_copies: k,
+            obs,
+            next_obs,
+            action,
+            reward,
+            mask,
+            expert,
+            weight: weights.to_vec(),
+            curl,
+        })
     }
 
     /// Write a checkpoint into `dir` (created; an existing one is replaced file by file).

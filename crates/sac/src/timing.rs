@@ -12,20 +12,21 @@ use std::time::Instant;
 use equiarm_nn::burn::tensor::Device;
 
 use crate::agent::{ActMode, Agent, AgentConfig, AgentError, Batch};
+use equiarm_types::{ACTION_DIM, OBS_PLANES};
 
 /// A batch of `b` rows of random `s`×`s` observations (normal pixels, tanh actions, a reward every
 /// 7th row, an expert every 3rd), from `seed`: the input of a timed update, whose values do not
 /// matter for its time.
 pub fn random_batch(b: usize, s: usize, seed: u64) -> Batch {
     let mut rng = crate::rng::stream(seed, 1);
-    let obs = crate::rng::normals(&mut rng, b * 5 * s * s);
-    let next_obs = crate::rng::normals(&mut rng, b * 5 * s * s);
-    let action = crate::rng::normals(&mut rng, b * 5).iter().map(|x| x.tanh()).collect();
+    let obs = crate::rng::normals(&mut rng, b * OBS_PLANES * s * s);
+    let next_obs = crate::rng::normals(&mut rng, b * OBS_PLANES * s * s);
+    let action = crate::rng::normals(&mut rng, b * ACTION_DIM).iter().map(|x| x.tanh()).collect();
     Batch {
-        b,
-        s,
-        m: 1,
-        k: 1,
+        rows: b,
+        size: s,
+        obs_copies: 1,
+        next_copies: 1,
         obs,
         next_obs,
         action,
@@ -98,7 +99,7 @@ pub fn time_update(
         }
         on_update(i);
     }
-    let one = &batch.obs[..5 * batch.s * batch.s];
+    let one = &batch.obs[..OBS_PLANES * batch.size * batch.size];
     let mut acts_s = Vec::with_capacity(act_reps);
     for _ in 0..act_reps {
         let t = Instant::now();

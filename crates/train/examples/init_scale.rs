@@ -44,7 +44,7 @@ fn main() {
     let y = actor.head.forward(t);
     println!("head mean/rms {:?}", stats(&y));
     let x2 = equiarm_sac::augment::network_input(&refs, &[(c, c); 8], input).unwrap();
-    let (m, ls) = actor.forward(Tensor::from_data(TensorData::new(x2, [8, 5, input, input]), &dev));
+    let (m, ls) = actor.forward(Tensor::from_data(TensorData::new(x2, [8, OBS_PLANES, input, input]), &dev));
     println!("mean {:?}", m.into_data().try_into_vec::<f32>().unwrap()[..10].to_vec());
     println!("log_std {:?}", ls.into_data().try_into_vec::<f32>().unwrap()[..5].to_vec());
 }

@@ -32,7 +32,7 @@ pub struct EvalResult {
 
 /// How one evaluation episode ended.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Episode {
+pub struct EpisodeOutcome {
     /// Whether the task was done.
     pub success: bool,
     /// Undiscounted return.
@@ -45,9 +45,9 @@ pub struct Episode {
 
 impl EvalResult {
     /// The evaluation of `updates` from its episodes.
-    pub fn from_episodes(updates: u64, episodes: &[Episode]) -> Self {
+    pub fn from_episodes(updates: u64, episodes: &[EpisodeOutcome]) -> Self {
         let n = episodes.len().max(1) as f64;
-        let mean = |f: &dyn Fn(&Episode) -> f64| episodes.iter().map(f).sum::<f64>() / n;
+        let mean = |f: &dyn Fn(&EpisodeOutcome) -> f64| episodes.iter().map(f).sum::<f64>() / n;
         EvalResult {
             updates,
             episodes: episodes.len(),
@@ -121,7 +121,7 @@ pub fn evaluate_on(
                 ep_disc[i] += gamma.powi(steps[i] as i32) * r.reward as f64;
                 steps[i] += 1;
                 if r.done {
-                    ended.push(Episode {
+                    ended.push(EpisodeOutcome {
                         success: r.info.success,
                         ret: ep_ret[i],
                         discounted: ep_disc[i],

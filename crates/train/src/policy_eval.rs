@@ -23,7 +23,7 @@ use equiarm_nn::nets::{Actor, CnnActor, EquiActor, NetConfig};
 use equiarm_sac::augment::centre_input;
 
 use crate::policy::{action_of, frame_of};
-use equiarm_types::NormalizedAction;
+use equiarm_types::{ACTION_DIM, NormalizedAction, OBS_PLANES};
 
 /// Transitions evaluated per forward pass.
 const BATCH: usize = 32;
@@ -118,12 +118,12 @@ pub fn evaluate(bag: &Path, checkpoint: &Path, net: &str, cfg: &NetConfig) -> an
         if b == 0 {
             return Ok(());
         }
-        let x = Tensor::<4>::from_data(TensorData::new(std::mem::take(inputs), [b, 5, s, s]), &device);
+        let x = Tensor::<4>::from_data(TensorData::new(std::mem::take(inputs), [b, OBS_PLANES, s, s]), &device);
         let (mean, _) = actor.forward(x);
         let out = mean.tanh().into_data().try_to_vec::<f32>().map_err(|e| anyhow::anyhow!("reading actions: {e:?}"))?;
         for (i, r) in recorded.drain(..).enumerate() {
-            let mut p = [0f32; 5];
-            p.copy_from_slice(&out[5 * i..5 * i + 5]);
+            let mut p = [0f32; ACTION_DIM];
+            p.copy_from_slice(&out[ACTION_DIM * i..ACTION_DIM * (i + 1)]);
             pairs.push((p, r));
         }
         Ok(())

@@ -43,7 +43,7 @@ use log::{info, warn};
 use serde::{Deserialize, Serialize};
 
 use crate::TrainError;
-use crate::evaluation::{Episode, EvalResult};
+use crate::evaluation::{EpisodeOutcome, EvalResult};
 use crate::ingest::{Ingest, Joined, UpdateDebt};
 use crate::lockstep::{Item, Lockstep, Refused};
 use crate::progress::Progress;
@@ -321,7 +321,7 @@ impl Trainer {
                 let episodes: Vec<_> = self
                     .pending_eval
                     .drain(..)
-                    .map(|r| Episode {
+                    .map(|r| EpisodeOutcome {
                         success: r.success,
                         ret: r.ret as f64,
                         discounted: r.discounted_return as f64,

@@ -6,7 +6,7 @@ use crate::error::{Result, SimError};
 
 /// One corruption flag.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Corruption {
+pub enum PairCorruption {
     /// A checkerboard floor of 0.2 m tiles (BulletArm's checker plane at `globalScaling` 0.2).
     Grid,
     /// A dark-grey 0.05 × 0.10 m slab floating at (0.50, −0.05, 0.20), seen but not touched.
@@ -30,41 +30,41 @@ pub enum Corruption {
     Side,
 }
 
-impl Corruption {
+impl PairCorruption {
     /// Every flag, in the order names are written.
-    pub const ALL: [Corruption; 10] = [
-        Corruption::Side,
-        Corruption::Grid,
-        Corruption::Occlusion,
-        Corruption::RandomLightColor,
-        Corruption::LightEffect,
-        Corruption::TwoLightColor,
-        Corruption::TwoSpecular,
-        Corruption::Squeeze,
-        Corruption::Reflect,
-        Corruption::InvertLabel,
+    pub const ALL: [PairCorruption; 10] = [
+        PairCorruption::Side,
+        PairCorruption::Grid,
+        PairCorruption::Occlusion,
+        PairCorruption::RandomLightColor,
+        PairCorruption::LightEffect,
+        PairCorruption::TwoLightColor,
+        PairCorruption::TwoSpecular,
+        PairCorruption::Squeeze,
+        PairCorruption::Reflect,
+        PairCorruption::InvertLabel,
     ];
 
     /// The flag's name: the paper's code's name (`condition_reverse` for invert-label).
     pub fn name(self) -> &'static str {
         match self {
-            Corruption::Grid => "grid",
-            Corruption::Occlusion => "occlusion",
-            Corruption::RandomLightColor => "random_light_color",
-            Corruption::LightEffect => "light_effect",
-            Corruption::TwoLightColor => "two_light_color",
-            Corruption::TwoSpecular => "two_specular",
-            Corruption::Squeeze => "squeeze",
-            Corruption::Reflect => "reflect",
-            Corruption::InvertLabel => "condition_reverse",
-            Corruption::Side => "side",
+            PairCorruption::Grid => "grid",
+            PairCorruption::Occlusion => "occlusion",
+            PairCorruption::RandomLightColor => "random_light_color",
+            PairCorruption::LightEffect => "light_effect",
+            PairCorruption::TwoLightColor => "two_light_color",
+            PairCorruption::TwoSpecular => "two_specular",
+            PairCorruption::Squeeze => "squeeze",
+            PairCorruption::Reflect => "reflect",
+            PairCorruption::InvertLabel => "condition_reverse",
+            PairCorruption::Side => "side",
         }
     }
 
-    /// The flag called `name` ([`Corruption::name`], or `invert_label` / `invert-label`).
+    /// The flag called `name` ([`PairCorruption::name`], or `invert_label` / `invert-label`).
     pub fn from_name(name: &str) -> Option<Self> {
         if name == "invert_label" || name == "invert-label" {
-            return Some(Corruption::InvertLabel);
+            return Some(PairCorruption::InvertLabel);
         }
         Self::ALL.into_iter().find(|c| c.name() == name)
     }
@@ -73,7 +73,7 @@ impl Corruption {
 /// A set of corruption flags (the empty set is the clean setting, `none`).
 #[derive(Clone, Debug, Default, PartialEq, Eq, Hash)]
 pub struct Corruptions {
-    flags: Vec<Corruption>,
+    flags: Vec<PairCorruption>,
 }
 
 /// The experiment's 15 settings, as [`Corruptions::parse`] reads them.
@@ -116,11 +116,11 @@ impl Corruptions {
                 }
                 continue;
             }
-            let c = Corruption::from_name(w).ok_or_else(|| SimError::Config {
+            let c = PairCorruption::from_name(w).ok_or_else(|| SimError::Config {
                 field: "corrupt",
                 message: format!(
                     "unknown corruption `{w}` in `{text}`; known: none, {}",
-                    Corruption::ALL.map(|c| c.name()).join(", ")
+                    PairCorruption::ALL.map(|c| c.name()).join(", ")
                 ),
             })?;
             if flags.contains(&c) {
@@ -128,21 +128,21 @@ impl Corruptions {
             }
             flags.push(c);
         }
-        flags.sort_by_key(|c| Corruption::ALL.iter().position(|a| a == c));
+        flags.sort_by_key(|c| PairCorruption::ALL.iter().position(|a| a == c));
         Ok(Self { flags })
     }
 
     /// Whether `flag` is set.
-    pub fn has(&self, flag: Corruption) -> bool {
+    pub fn has(&self, flag: PairCorruption) -> bool {
         self.flags.contains(&flag)
     }
 
-    /// The flags, in [`Corruption::ALL`] order.
-    pub fn flags(&self) -> &[Corruption] {
+    /// The flags, in [`PairCorruption::ALL`] order.
+    pub fn flags(&self) -> &[PairCorruption] {
         &self.flags
     }
 
-    /// The canonical name: the flags joined by commas in [`Corruption::ALL`] order, or `none`.
+    /// The canonical name: the flags joined by commas in [`PairCorruption::ALL`] order, or `none`.
     pub fn name(&self) -> String {
         if self.flags.is_empty() {
             "none".into()
@@ -154,7 +154,7 @@ impl Corruptions {
     /// The label of a pair whose scene was rotated by `idx`·45° and whose first image has duck 0 at
     /// world y `y0` and duck 1 at `y1`: `idx`, or with invert-label and `y0 < y1`, (8 − idx) mod 8.
     pub fn label(&self, idx: u8, y0: f32, y1: f32) -> u8 {
-        if self.has(Corruption::InvertLabel) && y0 < y1 { (8 - idx % 8) % 8 } else { idx % 8 }
+        if self.has(PairCorruption::InvertLabel) && y0 < y1 { (8 - idx % 8) % 8 } else { idx % 8 }
     }
 }
 

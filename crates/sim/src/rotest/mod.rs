@@ -15,6 +15,6 @@ pub mod corruption;
 pub mod pair;
 pub mod scene;
 
-pub use corruption::{Corruption, Corruptions, PAPER_SETTINGS};
+pub use corruption::{Corruptions, PAPER_SETTINGS, PairCorruption};
 pub use pair::{Pair, PairConfig, PairMeta, RgbdImage, generate_pair, recover_idx};
 pub use scene::{DuckPose, RotScene};

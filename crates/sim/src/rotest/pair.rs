@@ -6,7 +6,7 @@ use crate::error::{Result, SimError};
 use crate::render::{Frame, MeshCache, RenderOptions, rasterize_with};
 use crate::rng::Rng;
 
-use super::corruption::{Corruption, Corruptions};
+use super::corruption::{Corruptions, PairCorruption};
 use super::scene::{DuckPose, RotScene, camera, sample_placement};
 
 /// Largest stored image side, pixels.
@@ -129,11 +129,11 @@ pub fn base_light() -> RenderOptions {
 pub fn render(rs: &RotScene, cfg: &PairConfig, light_color: [f32; 3]) -> Result<RgbdImage> {
     let c = &cfg.corruptions;
     let hi = cfg.size * cfg.supersample;
-    let cam = camera(hi, c.has(Corruption::Side), c.has(Corruption::Squeeze))?;
+    let cam = camera(hi, c.has(PairCorruption::Side), c.has(PairCorruption::Squeeze))?;
     let meshes = MeshCache::new(&rs.scene);
     let mut opts = base_light();
     opts.light_color = light_color;
-    if c.has(Corruption::LightEffect) {
+    if c.has(PairCorruption::LightEffect) {
         opts.light_dir = [-1.0, 0.0, 0.7];
         opts.specular = 0.5;
         opts.shadows = true;
@@ -155,21 +155,21 @@ pub fn render(rs: &RotScene, cfg: &PairConfig, light_color: [f32; 3]) -> Result<
     };
     // The two halves' settings: light colour (two_light_color) and specular (two_specular).
     let (mut left, mut right) = (opts.clone(), opts.clone());
-    if c.has(Corruption::TwoLightColor) {
+    if c.has(PairCorruption::TwoLightColor) {
         left.light_color = [1.0, 0.2, 0.2];
         right.light_color = [0.2, 0.2, 1.0];
     }
-    if c.has(Corruption::TwoSpecular) {
+    if c.has(PairCorruption::TwoSpecular) {
         left.specular = 0.0;
         right.specular = 0.2;
     }
-    let frame = if c.has(Corruption::TwoLightColor) || c.has(Corruption::TwoSpecular) {
+    let frame = if c.has(PairCorruption::TwoLightColor) || c.has(PairCorruption::TwoSpecular) {
         halves(left, right)
     } else {
         draw(&opts)
     };
     let mut img = RgbdImage::downsample(&frame, cfg.size);
-    if c.has(Corruption::Reflect) {
+    if c.has(PairCorruption::Reflect) {
         img.reflect();
     }
     Ok(img)
@@ -186,8 +186,8 @@ pub fn generate_pair(assets: &Assets, cfg: &PairConfig, seed: u64) -> Result<Pai
     let idx = (rng.next_u64() % 8) as u8;
     // Drawn last, so that a seed gives the same scene and rotation under every setting.
     let light_color =
-        if c.has(Corruption::RandomLightColor) { [0; 3].map(|_| rng.uniform(0.2, 1.0)) } else { [1.0; 3] };
-    let mut rs = RotScene::new(assets, &placement, c.has(Corruption::Grid), c.has(Corruption::Occlusion))?;
+        if c.has(PairCorruption::RandomLightColor) { [0; 3].map(|_| rng.uniform(0.2, 1.0)) } else { [1.0; 3] };
+    let mut rs = RotScene::new(assets, &placement, c.has(PairCorruption::Grid), c.has(PairCorruption::Occlusion))?;
     rs.settle();
     let before_poses = rs.poses();
     let before = render(&rs, cfg, light_color)?;
