@@ -102,13 +102,15 @@ impl Where {
         self.runs.clone().or_else(|| grid.runs.clone()).unwrap_or_else(|| PathBuf::from("runs/experiments"))
     }
 
-    /// The command that regenerates the report, as the report quotes it.
+    /// The command that regenerates the report, as the report quotes it. A runs directory given
+    /// as an absolute path is left out: it names one machine, and the report's archive (runs.json)
+    /// holds every finished run it drew, so the command without it makes the same page on a clone.
     fn report_command(&self, out: &Path) -> String {
         let mut c = format!("equiarm experiment report {}", self.name);
         if let Some(f) = &self.file {
             c += &format!(" --file {}", f.display());
         }
-        if let Some(r) = &self.runs {
+        if let Some(r) = self.runs.as_ref().filter(|r| r.is_relative()) {
             c += &format!(" --runs {}", r.display());
         }
         if self.archive != Path::new("docs/results") {
