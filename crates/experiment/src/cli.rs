@@ -3,9 +3,12 @@
 
 use std::path::{Path, PathBuf};
 
+use equiarm_train::grid::RunnerOptions;
+use equiarm_train::rundir::RunDirLock;
+
 use crate::error::Result;
 use crate::grid::Grid;
-use crate::runner::{RunState, RunnerOptions, STOPPED_EXIT, run_state};
+use crate::runner::{ExperimentGrid, STOPPED_EXIT};
 
 /// `equiarm experiment …`.
 #[derive(Debug, clap::Subcommand)]
@@ -98,6 +101,21 @@ impl Where {
         Ok(g)
     }
 
+    /// The grid's runs named by `only` (all when empty), with its runs directory and archive.
+    fn experiment_grid(&self, only: &[String]) -> Result<ExperimentGrid> {
+        let grid = self.grid()?;
+        Ok(ExperimentGrid {
+            runs: self.runs(&grid),
+            grid: grid.only(only)?,
+            archive: crate::report::read_archives(&self.archive)?,
+            archive_dir: self.archive.clone(),
+            exe: std::env::current_exe()
+                .map_err(|e| crate::ExperimentError::Io { path: "equiarm".into(), message: e.to_string() })?,
+            threads: 1,
+            report: None,
+        })
+    }
+
     fn runs(&self, grid: &Grid) -> PathBuf {
         self.runs.clone().or_else(|| grid.runs.clone()).unwrap_or_else(|| PathBuf::from("runs/experiments"))
     }
@@ -131,83 +149,37 @@ fn default_out(name: &str) -> PathBuf {
 pub fn run(cmd: ExperimentCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
     match cmd {
         ExperimentCommand::Run { at, parallel, threads, report, out, only } => {
-            let grid = at.grid()?;
-            let chosen = grid.only(&only)?;
-            let runs = at.runs(&grid);
+            let mut grid = at.experiment_grid(&only)?;
+            grid.threads = threads as usize;
+            if report {
+                let out = out.unwrap_or_else(|| default_out(&at.name));
+                grid.report = Some((at.grid()?, out.clone(), at.report_command(&out)));
+            }
+            // One runner per grid; grids may share a runs directory (and the runs they have in
+            // common: a run's directory is named by its cell, and its config must agree).
+            let _claim = RunDirLock::acquire(&grid.runs.join(".grids").join(&at.name)).map_err(|e| {
+                crate::ExperimentError::Run {
+                    dir: grid.runs.clone(),
+                    message: format!("another runner works on grid {} here ({e})", at.name),
+                }
+            })?;
             let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
             let opts = RunnerOptions {
-                exe: std::env::current_exe()
-                    .map_err(|e| crate::ExperimentError::Io { path: "equiarm".into(), message: e.to_string() })?,
-                parallel: parallel.unwrap_or((cores / threads as usize).max(1)).max(1),
-                threads: threads as usize,
-                verbose: true,
+                parallel: parallel.unwrap_or((cores / threads as usize).max(1)),
+                // a killed runner's children write their checkpoint before they end
+                wait_for_locked: std::time::Duration::from_secs(600),
             };
-            let archive = crate::report::read_archives(&at.archive)?;
-            let s = crate::runner::run(&chosen, &runs, &archive, &opts, stop)?;
-            println!(
-                "experiment {}: {} finished before, {} finished now, {} failed, {} left unfinished",
-                grid.name,
-                s.already_done,
-                s.finished,
-                s.failed.len(),
-                s.stopped
-            );
-            for (dir, _) in &s.failed {
-                println!("failed: {} (see its {})", dir.display(), crate::runner::LOG_FILE);
+            let plan = grid.plan()?;
+            let title = equiarm_train::grid::Grid::title(&grid);
+            let summary = equiarm_train::grid::run(&mut grid, plan, &opts, stop)?;
+            for line in summary.lines(&title) {
+                println!("{line}");
             }
-            if report && crate::report::all_finished(&grid, &runs, &archive)? {
-                let out = out.unwrap_or_else(|| default_out(&at.name));
-                for f in crate::report::write(&grid, &runs, &archive, &out, &at.report_command(&out))? {
-                    println!("{}", f.display());
-                }
-            }
-            Ok(if !s.failed.is_empty() {
-                1
-            } else if s.stopped > 0 {
-                STOPPED_EXIT
-            } else {
-                0
-            })
+            Ok(summary.exit_code())
         }
         ExperimentCommand::Status { at, only } => {
-            let grid = at.grid()?.only(&only)?;
-            let runs = at.runs(&grid);
-            let archive = crate::report::read_archives(&at.archive)?;
-            let (mut done, mut partial, mut new) = (0, 0, 0);
-            for cell in grid.cells() {
-                let cfg = grid.config(cell)?;
-                let dir = runs.join(cell.rel_dir());
-                let line = match run_state(&dir, &cfg)? {
-                    RunState::Done(r) => {
-                        done += 1;
-                        format!(
-                            "finished: {} updates, held-out success {:.2}, discounted return {:.3}",
-                            r.updates, r.heldout.success_rate, r.heldout.discounted_return
-                        )
-                    }
-                    RunState::Partial(_) | RunState::New if crate::report::archived(&archive, cell, &cfg).is_some() => {
-                        done += 1;
-                        let r = &crate::report::archived(&archive, cell, &cfg).expect("checked").result;
-                        format!(
-                            "finished (archived in {}): {} updates, held-out success {:.2}, discounted return {:.3}",
-                            at.archive.display(),
-                            r.updates,
-                            r.heldout.success_rate,
-                            r.heldout.discounted_return
-                        )
-                    }
-                    RunState::Partial(u) => {
-                        partial += 1;
-                        format!("interrupted at {u} of {} updates", cfg.total_updates)
-                    }
-                    RunState::New => {
-                        new += 1;
-                        "not started".into()
-                    }
-                };
-                println!("{}  {line}", cell.rel_dir().display());
-            }
-            println!("{done} finished, {partial} interrupted, {new} not started ({} runs)", grid.cells().len());
+            let grid = at.experiment_grid(&only)?;
+            print!("{}", equiarm_train::grid::status(&grid.plan()?, &at.archive));
             Ok(0)
         }
         ExperimentCommand::Report { at, out } => {
@@ -225,14 +197,7 @@ pub fn run(cmd: ExperimentCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
             let stop_or_orphan = || stop() || std::os::unix::process::parent_id() != parent;
             match crate::runner::run_one(&dir, heldout_episodes, checkpoint_minutes * 60.0, &stop_or_orphan)? {
                 Some(r) => {
-                    println!(
-                        "{}: {} updates, held-out success {:.2} (discounted return {:.3}) over {} episodes",
-                        dir.display(),
-                        r.updates,
-                        r.heldout.success_rate,
-                        r.heldout.discounted_return,
-                        r.heldout.episodes
-                    );
+                    println!("{}: {}", dir.display(), crate::runner::result_line(&r));
                     Ok(0)
                 }
                 None => Ok(STOPPED_EXIT),

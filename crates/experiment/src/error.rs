@@ -29,6 +29,9 @@ pub enum ExperimentError {
         /// The cause.
         message: String,
     },
+    /// The grid runner could not lock or watch a run.
+    #[error(transparent)]
+    Runner(#[from] equiarm_train::grid::GridError),
     /// Training or evaluating a run failed.
     #[error(transparent)]
     Train(#[from] equiarm_train::TrainError),

@@ -21,7 +21,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{ExperimentError, Result, io};
 use crate::grid::{Cell, Grid, VARIANTS, Variant};
-use crate::runner::{RESULT_FILE, RunResult, RunState, run_state};
+use crate::runner::{RESULT_FILE, RunResult, check_config, read_result};
 
 /// One run as the report sees it.
 #[derive(Clone, Debug)]
@@ -106,10 +106,8 @@ pub fn collect(grid: &Grid, runs: &Path, archive: &Archive) -> Result<Vec<RunVie
         if !dir.is_dir() {
             continue;
         }
-        let result = match run_state(&dir, &cfg)? {
-            RunState::Done(r) => Some(*r),
-            _ => None,
-        };
+        check_config(&dir, &cfg)?;
+        let result = read_result(&dir)?;
         // A finished run's evals.json; a run in progress has its evaluations up to its latest
         // checkpoint in that checkpoint's loop state.
         let bad = |e: String| ExperimentError::Run { dir: dir.clone(), message: e };

@@ -1,5 +1,5 @@
-//! Running a grid: each cell is one child process (`equiarm experiment run-one RUN_DIR`), a few at a
-//! time, each on its own threads, so that runs are as reproducible as `equiarm train --in-process`
+//! Running a grid with the one grid runner ([`equiarm_train::grid`]): each cell is one child process
+//! (`equiarm experiment run-one RUN_DIR`), a few at a time, each on its own threads, so that runs are as reproducible as `equiarm train --in-process`
 //! alone and one failing run does not take the others down.
 //!
 //! A run's directory tells its state: `result.json` — finished (training and the held-out
@@ -17,20 +17,21 @@
 //! training. Run the same command again to continue: finished runs are skipped, interrupted ones
 //! resume, and a run whose directory is still locked by an exiting child is waited for.
 
-use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use equiarm_sac::config::TrainConfig;
 use equiarm_sac::learner::{Learner, first_difference, read_json, write_json};
 use equiarm_train::evaluation::{EvalResult, Stream, evaluate_on};
+use equiarm_train::grid::{Grid as GridSpec, GridError, Job, JobEnd, Planned, RunState};
 use equiarm_train::inprocess::RunOptions;
 use equiarm_train::rundir::{RUN_FILES, RunDirLock, find_checkpoint};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ExperimentError, Result, io};
 use crate::grid::{Cell, Grid};
+use crate::report::Archive;
 
 /// A finished run's summary, `RUN/result.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -55,50 +56,76 @@ pub const RESULT_FILE: &str = "result.json";
 /// The log of a run's child processes (appended to by each part).
 pub const LOG_FILE: &str = "log.txt";
 
-/// A run's state, from its directory.
-#[derive(Clone, Debug, PartialEq)]
-pub enum RunState {
-    /// Nothing yet (or nothing worth keeping).
-    New,
-    /// Interrupted at this many updates.
-    Partial(u64),
-    /// Finished.
-    Done(Box<RunResult>),
+/// Refuses a run directory whose `config.json` is not `cfg` (the grid file changed under its runs).
+pub fn check_config(dir: &Path, cfg: &TrainConfig) -> Result<()> {
+    let cfg_file = dir.join("config.json");
+    if !cfg_file.is_file() {
+        return Ok(());
+    }
+    let bad = |message: String| ExperimentError::Run { dir: dir.to_path_buf(), message };
+    let old: TrainConfig = read_json(&cfg_file).map_err(|e| bad(format!("config.json: {e}")))?;
+    if &old == cfg {
+        return Ok(());
+    }
+    Err(bad(format!(
+        "was started with another config than the grid gives now (first difference: `{}`); restore the grid file, or move the run away to start it afresh",
+        first_difference(
+            &serde_json::to_value(&old).unwrap_or_default(),
+            &serde_json::to_value(cfg).unwrap_or_default(),
+            ""
+        )
+    )))
 }
 
-/// The state of the run in `dir`, whose config must be `cfg` if it has one.
-pub fn run_state(dir: &Path, cfg: &TrainConfig) -> Result<RunState> {
-    let bad = |message: String| ExperimentError::Run { dir: dir.to_path_buf(), message };
-    let cfg_file = dir.join("config.json");
-    if cfg_file.is_file() {
-        let old: TrainConfig = read_json(&cfg_file).map_err(|e| bad(format!("config.json: {e}")))?;
-        if &old != cfg {
-            return Err(bad(format!(
-                "was started with another config than the grid gives now (first difference: `{}`); restore the grid file, or move the run away to start it afresh",
-                first_difference(
-                    &serde_json::to_value(&old).unwrap_or_default(),
-                    &serde_json::to_value(cfg).unwrap_or_default(),
-                    ""
-                )
-            )));
-        }
+/// The result of the run in `dir`, if it finished.
+pub fn read_result(dir: &Path) -> Result<Option<RunResult>> {
+    let path = dir.join(RESULT_FILE);
+    if !path.is_file() {
+        return Ok(None);
     }
-    let result = dir.join(RESULT_FILE);
-    if result.is_file() {
-        let r: RunResult = read_json(&result).map_err(|e| bad(format!("{RESULT_FILE}: {e}")))?;
-        return Ok(RunState::Done(Box::new(r)));
+    read_json(&path)
+        .map(Some)
+        .map_err(|e| ExperimentError::Run { dir: dir.to_path_buf(), message: format!("{RESULT_FILE}: {e}") })
+}
+
+/// The updates of the latest checkpoint of the run in `dir`, if it wrote one.
+fn checkpoint_updates(dir: &Path) -> Result<Option<u64>> {
+    if !dir.join("checkpoints").join("latest").is_file() {
+        return Ok(None);
     }
-    if dir.join("checkpoints").join("latest").is_file() {
-        let ck = find_checkpoint(dir)?;
-        let updates = ck
-            .file_name()
-            .and_then(|n| n.to_str())
-            .and_then(|n| n.strip_prefix("step_"))
-            .and_then(|n| n.parse().ok())
-            .ok_or_else(|| bad(format!("checkpoint {} is not named step_N", ck.display())))?;
-        return Ok(RunState::Partial(updates));
+    let ck = find_checkpoint(dir)?;
+    let updates =
+        ck.file_name().and_then(|n| n.to_str()).and_then(|n| n.strip_prefix("step_")).and_then(|n| n.parse().ok());
+    updates.map(Some).ok_or_else(|| ExperimentError::Run {
+        dir: dir.to_path_buf(),
+        message: format!("checkpoint {} is not named step_N", ck.display()),
+    })
+}
+
+/// A line of a finished run's result.
+pub fn result_line(r: &RunResult) -> String {
+    format!(
+        "{} updates, held-out success {:.2} (discounted return {:.3}) over {} episodes",
+        r.updates, r.heldout.success_rate, r.heldout.discounted_return, r.heldout.episodes
+    )
+}
+
+/// Where the run of `cell` (config `cfg`) in `dir` stands; `archived` is its archived result.
+fn state_of(dir: &Path, cfg: &TrainConfig, archived: Option<&RunResult>) -> Result<RunState> {
+    check_config(dir, cfg)?;
+    if let Some(r) = read_result(dir)? {
+        return Ok(RunState::Finished(result_line(&r)));
     }
-    Ok(RunState::New)
+    if let Some(r) = archived {
+        return Ok(RunState::Archived(result_line(r)));
+    }
+    if RunDirLock::is_held(dir) {
+        return Ok(RunState::Unfinished("in training now".into()));
+    }
+    Ok(match checkpoint_updates(dir)? {
+        Some(u) => RunState::Unfinished(format!("interrupted at {u} of {} updates", cfg.total_updates)),
+        None => RunState::New,
+    })
 }
 
 /// The child's side: train the run in `dir` (its `config.json`) from scratch or from its latest
@@ -114,11 +141,11 @@ pub fn run_one(
     let cfg: TrainConfig = read_json(&dir.join("config.json"))
         .map_err(|e| ExperimentError::Run { dir: dir.to_path_buf(), message: format!("config.json: {e}") })?;
     equiarm_train::config::check(&cfg).map_err(equiarm_train::TrainError::from)?;
-    let resume = match run_state(dir, &cfg)? {
-        RunState::Done(r) => return Ok(Some(*r)),
-        RunState::Partial(_) => Some(find_checkpoint(dir)?),
-        RunState::New => None,
-    };
+    check_config(dir, &cfg)?;
+    if let Some(r) = read_result(dir)? {
+        return Ok(Some(r));
+    }
+    let resume = checkpoint_updates(dir)?.map(|_| find_checkpoint(dir)).transpose()?;
     let opts = RunOptions {
         run_dir: dir.to_path_buf(),
         resume,
@@ -169,215 +196,141 @@ fn prune_checkpoints(dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// How the runner runs.
-#[derive(Clone, Debug)]
-pub struct RunnerOptions {
+/// A grid and where its runs are, as the one grid runner ([`equiarm_train::grid`]) drives it: each
+/// run a child process `equiarm experiment run-one RUN_DIR`.
+pub struct ExperimentGrid {
+    /// The grid (its `--only` cells).
+    pub grid: Grid,
+    /// The runs directory.
+    pub runs: PathBuf,
+    /// Finished runs of earlier reports.
+    pub archive: Archive,
+    /// Where the archive was read from (as status names it).
+    pub archive_dir: PathBuf,
     /// The `equiarm` executable the children run.
     pub exe: PathBuf,
-    /// Runs at a time.
-    pub parallel: usize,
     /// Threads per run (`RAYON_NUM_THREADS` of each child).
     pub threads: usize,
-    /// Print a line per start and end on stderr.
-    pub verbose: bool,
+    /// Where the report goes when every run of `full` is finished, and the command quoted in it.
+    pub report: Option<(Grid, PathBuf, String)>,
 }
 
-/// What a runner invocation did.
-#[derive(Clone, Debug, Default)]
-pub struct RunnerSummary {
-    /// Runs finished before this invocation.
-    pub already_done: usize,
-    /// Runs finished by this invocation.
-    pub finished: usize,
-    /// Runs whose child failed: directory and the last lines of its log.
-    pub failed: Vec<(PathBuf, String)>,
-    /// Runs left unfinished because the runner was stopped.
-    pub stopped: usize,
+impl ExperimentGrid {
+    /// Every run of the grid with where it stands.
+    pub fn plan(&self) -> Result<Vec<Planned<(Cell, TrainConfig)>>> {
+        let mut plan = Vec::new();
+        for cell in self.grid.cells() {
+            let cfg = self.grid.config(cell)?;
+            let mut p = Planned {
+                dir: self.runs.join(cell.rel_dir()),
+                group: cell.task.to_string(),
+                state: RunState::New,
+                run: (cell.clone(), cfg),
+            };
+            p.state = GridSpec::state(self, &p)?;
+            plan.push(p);
+        }
+        Ok(plan)
+    }
 }
 
-struct Running {
-    dir: PathBuf,
+impl GridSpec for ExperimentGrid {
+    type Run = (Cell, TrainConfig);
+    type Error = ExperimentError;
+
+    fn title(&self) -> String {
+        format!("experiment {}", self.grid.name)
+    }
+
+    fn archive(&self) -> &Path {
+        &self.archive_dir
+    }
+
+    fn state(&self, p: &Planned<Self::Run>) -> Result<RunState> {
+        let (cell, cfg) = &p.run;
+        state_of(&p.dir, cfg, crate::report::archived(&self.archive, cell, cfg).map(|a| &a.result))
+    }
+
+    /// A new run's directory is cleared of whatever a start killed before its first checkpoint
+    /// left, and gets the cell's `config.json`.
+    fn start(&mut self, p: &Planned<Self::Run>) -> Result<Box<dyn Job>> {
+        if GridSpec::state(self, p)? == RunState::New {
+            for f in RUN_FILES.iter().chain(&["learning_curve.png"]) {
+                let path = p.dir.join(f);
+                if path.is_dir() {
+                    std::fs::remove_dir_all(&path).map_err(io(&path))?;
+                } else if path.exists() {
+                    std::fs::remove_file(&path).map_err(io(&path))?;
+                }
+            }
+            write_json(&p.dir.join("config.json"), &p.run.1)
+                .map_err(|e| ExperimentError::Io { path: p.dir.join("config.json"), message: e.to_string() })?;
+        }
+        let child = spawn(&self.exe, self.threads, &self.grid, &p.dir)?;
+        Ok(Box::new(ChildJob { child, log: p.dir.join(LOG_FILE) }))
+    }
+
+    fn report(&mut self) -> Result<Vec<PathBuf>> {
+        match &self.report {
+            Some((full, out, command)) if crate::report::all_finished(full, &self.runs, &self.archive)? => {
+                crate::report::write(full, &self.runs, &self.archive, out, command)
+            }
+            _ => Ok(Vec::new()),
+        }
+    }
+}
+
+/// A run's child process.
+struct ChildJob {
     child: Child,
-    started: Instant,
+    log: PathBuf,
 }
 
-/// Run every unfinished cell of `grid` below `runs` (a run `archive` has with the same config counts
-/// as finished), `opts.parallel` at a time, until all are
-/// finished or `stop` turns true (then the children are sent SIGINT, which makes them checkpoint,
-/// and are waited for).
-pub fn run(
-    grid: &Grid,
-    runs: &Path,
-    archive: &crate::report::Archive,
-    opts: &RunnerOptions,
-    stop: &dyn Fn() -> bool,
-) -> Result<RunnerSummary> {
-    // One runner per grid; grids may share a runs directory (and the runs they have in common:
-    // a run's directory is named by its cell, and its config must agree).
-    let claim_dir = runs.join(".grids").join(&grid.name);
-    let _claim = RunDirLock::acquire(&claim_dir).map_err(|e| ExperimentError::Run {
-        dir: runs.to_path_buf(),
-        message: format!("another runner works on grid {} here ({e})", grid.name),
-    })?;
-    let mut summary = RunnerSummary::default();
-    let mut queue: VecDeque<(Cell, TrainConfig)> = VecDeque::new();
-    for cell in grid.cells() {
-        let cfg = grid.config(cell)?;
-        match run_state(&runs.join(cell.rel_dir()), &cfg)? {
-            RunState::Done(_) => summary.already_done += 1,
-            _ if crate::report::archived(archive, cell, &cfg).is_some() => summary.already_done += 1,
-            _ => queue.push_back((cell.clone(), cfg)),
+impl ChildJob {
+    fn end(&self, status: std::process::ExitStatus) -> JobEnd {
+        match status.code() {
+            Some(0) => JobEnd::Done,
+            Some(STOPPED_EXIT) => JobEnd::Stopped,
+            _ => JobEnd::Failed(format!("{status}; the end of its {LOG_FILE}:\n{}", log_tail(&self.log, 8))),
         }
     }
-    let total = grid.cells().len();
-    if opts.verbose {
-        eprintln!(
-            "experiment {}: {total} runs, {} finished before, {} to run, {} at a time",
-            grid.name,
-            summary.already_done,
-            queue.len(),
-            opts.parallel
-        );
-    }
-    let mut running: Vec<Running> = Vec::new();
-    let mut waiting_since: Option<Instant> = None;
-    loop {
-        if stop() {
-            break;
-        }
-        // Start runs while there is room; a run still locked (a child of an earlier runner
-        // writing its last checkpoint) goes to the back of the queue.
-        let mut tried = 0;
-        while running.len() < opts.parallel.max(1) && tried < queue.len() {
-            let Some((cell, cfg)) = queue.pop_front() else { break };
-            let dir = runs.join(cell.rel_dir());
-            match RunDirLock::acquire(&dir) {
-                Ok(lock) => drop(lock),
-                Err(_) => {
-                    queue.push_back((cell, cfg));
-                    tried += 1;
-                    continue;
-                }
-            }
-            let state = run_state(&dir, &cfg)?;
-            if let RunState::Done(_) = state {
-                summary.finished += 1;
-                continue;
-            }
-            if state == RunState::New {
-                for f in RUN_FILES.iter().chain(&["learning_curve.png"]) {
-                    let p = dir.join(f);
-                    if p.is_dir() {
-                        std::fs::remove_dir_all(&p).map_err(io(&p))?;
-                    } else if p.exists() {
-                        std::fs::remove_file(&p).map_err(io(&p))?;
-                    }
-                }
-                write_json(&dir.join("config.json"), &cfg)
-                    .map_err(|e| ExperimentError::Io { path: dir.join("config.json"), message: e.to_string() })?;
-            }
-            let child = spawn(opts, grid, &dir)?;
-            if opts.verbose {
-                let from = match state {
-                    RunState::Partial(u) => format!("resumed at {u} updates"),
-                    _ => "started".into(),
-                };
-                eprintln!("{} {from} ({} of {total} left)", dir.display(), queue.len() + running.len() + 1);
-            }
-            running.push(Running { dir, child, started: Instant::now() });
-        }
-        if running.is_empty() && queue.is_empty() {
-            break;
-        }
-        if running.is_empty() {
-            // Everything left is locked by exiting children of an earlier runner: wait a while.
-            let since = *waiting_since.get_or_insert_with(Instant::now);
-            if since.elapsed() > Duration::from_secs(600) {
-                let dirs: Vec<String> =
-                    queue.iter().map(|(c, _)| runs.join(c.rel_dir()).display().to_string()).collect();
-                return Err(ExperimentError::Run {
-                    dir: runs.to_path_buf(),
-                    message: format!("runs still locked by another process after 10 minutes: {}", dirs.join(", ")),
-                });
-            }
-        } else {
-            waiting_since = None;
-        }
-        std::thread::sleep(Duration::from_millis(200));
-        let mut i = 0;
-        while i < running.len() {
-            match running[i].child.try_wait().map_err(io(&running[i].dir))? {
-                None => i += 1,
-                Some(status) => {
-                    let r = running.swap_remove(i);
-                    finished(&r, status, &mut summary, opts.verbose);
-                }
-            }
-        }
-    }
-    // Stopped (or done): forward SIGINT and wait for the children's checkpoints.
-    for r in &running {
-        signal(&r.child, libc::SIGINT);
-    }
-    for mut r in running {
-        let status = r.child.wait().map_err(io(&r.dir))?;
-        let done = r.dir.join(RESULT_FILE).is_file();
-        if done {
-            finished(&r, status, &mut summary, opts.verbose);
-        } else {
-            summary.stopped += 1;
-        }
-    }
-    summary.stopped += queue.len();
-    Ok(summary)
 }
 
-fn finished(r: &Running, status: std::process::ExitStatus, summary: &mut RunnerSummary, verbose: bool) {
-    let result: Option<RunResult> = if status.success() { read_json(&r.dir.join(RESULT_FILE)).ok() } else { None };
-    match result {
-        Some(res) => {
-            summary.finished += 1;
-            if verbose {
-                eprintln!(
-                    "{} finished: {} updates, held-out success {:.2} (discounted return {:.3}) over {} episodes, {:.0} s",
-                    r.dir.display(),
-                    res.updates,
-                    res.heldout.success_rate,
-                    res.heldout.discounted_return,
-                    res.heldout.episodes,
-                    r.started.elapsed().as_secs_f64()
-                );
-            }
-        }
-        None if status.code() == Some(STOPPED_EXIT) => summary.stopped += 1,
-        None => {
-            let tail = log_tail(&r.dir.join(LOG_FILE), 8);
-            if verbose {
-                eprintln!("{} failed ({status}):\n{tail}", r.dir.display());
-            }
-            summary.failed.push((r.dir.clone(), tail));
-        }
+impl Job for ChildJob {
+    fn poll(&mut self) -> std::result::Result<Option<JobEnd>, GridError> {
+        let status =
+            self.child.try_wait().map_err(|e| GridError::Io { path: self.log.clone(), message: e.to_string() })?;
+        Ok(status.map(|s| self.end(s)))
+    }
+
+    fn stop(&mut self) {
+        signal(&self.child, libc::SIGINT);
+    }
+
+    fn wait(&mut self) -> std::result::Result<JobEnd, GridError> {
+        let status = self.child.wait().map_err(|e| GridError::Io { path: self.log.clone(), message: e.to_string() })?;
+        Ok(self.end(status))
     }
 }
 
 /// The exit status of a child stopped before its run finished (a checkpoint was written).
 pub use equiarm_train::STOPPED_EXIT;
 
-fn spawn(opts: &RunnerOptions, grid: &Grid, dir: &Path) -> Result<Child> {
+fn spawn(exe: &Path, threads: usize, grid: &Grid, dir: &Path) -> Result<Child> {
     let log_path = dir.join(LOG_FILE);
     let log = std::fs::OpenOptions::new().create(true).append(true).open(&log_path).map_err(io(&log_path))?;
     let err = log.try_clone().map_err(io(&log_path))?;
-    Command::new(&opts.exe)
+    Command::new(exe)
         .args(["experiment", "run-one"])
         .arg(dir)
         .args(["--heldout-episodes", &grid.heldout_episodes.to_string()])
         .args(["--checkpoint-minutes", &grid.checkpoint_minutes.to_string()])
-        .env("RAYON_NUM_THREADS", opts.threads.max(1).to_string())
+        .env("RAYON_NUM_THREADS", threads.max(1).to_string())
         .stdin(Stdio::null())
         .stdout(log)
         .stderr(err)
         .spawn()
-        .map_err(|e| ExperimentError::Io { path: opts.exe.clone(), message: format!("starting a run: {e}") })
+        .map_err(|e| ExperimentError::Io { path: exe.to_path_buf(), message: format!("starting a run: {e}") })
 }
 
 fn signal(child: &Child, sig: libc::c_int) {

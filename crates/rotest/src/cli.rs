@@ -276,8 +276,13 @@ fn print_epoch(e: &crate::train::EpochRecord) {
 
 pub(crate) fn summary(r: &crate::train::RotestRecord) -> String {
     let secs: f64 = r.history.iter().map(|e| e.seconds).sum();
+    // (an archived record keeps no history)
+    let epochs = match r.history.len() {
+        0 => String::new(),
+        n => format!("; {n} epochs, {:.1} s/epoch", secs / n as f64),
+    };
     format!(
-        "{} {:?} N={} img-trans {} seed {}: test accuracy {:.4} at best validation epoch {} (val {:.4}); {} epochs, {:.1} s/epoch",
+        "{} {:?} N={} img-trans {} seed {}: test accuracy {:.4} at best validation epoch {} (val {:.4}){epochs}",
         r.corrupt,
         r.config.model,
         r.config.train_pairs,
@@ -286,8 +291,6 @@ pub(crate) fn summary(r: &crate::train::RotestRecord) -> String {
         r.test_acc,
         r.best_epoch,
         r.best_val_acc,
-        r.history.len(),
-        secs / r.history.len().max(1) as f64
     )
 }
 

@@ -38,6 +38,9 @@ pub enum RotestError {
         /// The run directory.
         path: PathBuf,
     },
+    /// The grid runner could not lock or watch a run.
+    #[error(transparent)]
+    Runner(#[from] equiarm_train::grid::GridError),
     /// The simulator failed (a camera or scene setting).
     #[error(transparent)]
     Sim(#[from] equiarm_sim::SimError),

@@ -1,18 +1,23 @@
 //! The experiment's grid (`equiarm rotest grid` and `status`): every setting × training size ×
 //! seed × variant, which of those runs are finished (here, or in a committed report's archive) and
-//! which are still to train, and training the rest.
+//! which are still to train, and training the rest with the one grid runner
+//! ([`equiarm_train::grid`]).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
 
+use equiarm_nn::burn::tensor::Device;
 use equiarm_sim::rotest::{Corruptions, PAPER_SETTINGS, PairConfig};
 use equiarm_train::STOPPED_EXIT;
+use equiarm_train::grid::{Grid as GridSpec, Job, JobEnd, Planned, RunState, RunnerOptions, ThreadJob};
 
 use crate::cli::{ClassifierVariant, TrainOpts};
 use crate::dataset::Dataset;
 use crate::error::{Result, RotestError};
 use crate::generate::{generate, setting_file_stem};
-use crate::train::{Checkpointing, Outcome, RotestConfig};
+use crate::train::{Checkpointing, Outcome, RotestConfig, RotestRecord};
 
 /// What names a grid: where its datasets, runs and report are, and which runs it holds.
 #[derive(Clone, Debug, clap::Args)]
@@ -44,41 +49,13 @@ pub struct GridArgs {
     /// Where the report goes.
     #[arg(long, default_value = "docs/results")]
     pub report: PathBuf,
+    /// Runs at a time (each on a thread of this process).
+    #[arg(long, default_value_t = 1, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
+    pub parallel: usize,
 }
 
-/// Where one run of the grid stands.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum RunState {
-    /// Its `run.json` is in the runs directory.
-    Finished,
-    /// The report's archive holds it, with the same configuration.
-    Archived,
-    /// Its directory exists without a `run.json`: stopped or cut short (it continues from its
-    /// checkpoint, if it wrote one), or in training now.
-    Unfinished,
-    /// Not started.
-    New,
-}
-
-impl RunState {
-    /// Whether the grid still has to train it.
-    pub fn to_train(self) -> bool {
-        matches!(self, RunState::Unfinished | RunState::New)
-    }
-}
-
-/// One run of the grid.
-#[derive(Clone, Debug)]
-pub struct PlannedRun {
-    /// Its setting.
-    pub setting: Corruptions,
-    /// `RUNS/<setting>/<variant>/<N>/s<seed>`.
-    pub dir: PathBuf,
-    /// What it trains.
-    pub cfg: RotestConfig,
-    /// Where it stands.
-    pub state: RunState,
-}
+/// One run of the grid: its setting and what it trains.
+pub type PlannedRun = Planned<(Corruptions, RotestConfig)>;
 
 impl GridArgs {
     /// The settings named, checked, each once (in the order first named).
@@ -112,7 +89,7 @@ impl GridArgs {
         // The runs a committed report holds (read once: the grid writes the report only at the end).
         let archived: BTreeMap<_, _> = crate::report::read_archive(&self.report.join(crate::report::ARCHIVE_FILE))?
             .into_iter()
-            .map(|r| (crate::report::run_key(&r), r.config))
+            .map(|r| (crate::report::run_key(&r), r))
             .collect();
         let mut plan = Vec::new();
         for c in settings {
@@ -124,17 +101,10 @@ impl GridArgs {
                         let dir =
                             self.runs.join(&stem).join(variant.name()).join(n.to_string()).join(format!("s{seed}"));
                         let cfg = self.opts.config(model, n, img_trans, seed)?;
-                        let key = crate::report::key(&c.name(), &cfg);
-                        let state = if dir.join("run.json").is_file() {
-                            RunState::Finished
-                        } else if archived.get(&key) == Some(&cfg) {
-                            RunState::Archived
-                        } else if dir.exists() {
-                            RunState::Unfinished
-                        } else {
-                            RunState::New
-                        };
-                        plan.push(PlannedRun { setting: c.clone(), dir, cfg, state });
+                        let archived = archived.get(&crate::report::key(&c.name(), &cfg)).filter(|r| r.config == cfg);
+                        let mut p = Planned { dir, group: c.name(), state: RunState::New, run: (c.clone(), cfg) };
+                        p.state = state_of(&p, archived)?;
+                        plan.push(p);
                     }
                 }
             }
@@ -148,110 +118,120 @@ impl GridArgs {
     }
 }
 
-/// `rotest status`: a line per setting (runs finished here, archived, unfinished, not started),
-/// one for the whole grid, then every run still to train with its directory.
-pub fn status(args: &GridArgs) -> Result<String> {
-    let plan = args.plan()?;
-    let count = |runs: &[&PlannedRun], state: RunState| runs.iter().filter(|r| r.state == state).count();
-    let line = |runs: &[&PlannedRun]| {
-        format!(
-            "{} finished here, {} archived in {}, {} unfinished (cut short, or in training now), {} not started",
-            count(runs, RunState::Finished),
-            count(runs, RunState::Archived),
-            args.report.display(),
-            count(runs, RunState::Unfinished),
-            count(runs, RunState::New)
-        )
-    };
-    let mut s = String::new();
-    for group in plan.chunk_by(|a, b| a.setting == b.setting) {
-        let runs: Vec<&PlannedRun> = group.iter().collect();
-        s += &format!("{}: {}\n", group[0].setting.name(), line(&runs));
+/// Where a run stands: its `run.json`, else the report's archive (`archived`, with the same
+/// configuration), else its directory (and checkpoint), else new.
+fn state_of(p: &PlannedRun, archived: Option<&RotestRecord>) -> Result<RunState> {
+    let record = p.dir.join("run.json");
+    if record.is_file() {
+        return Ok(RunState::Finished(crate::cli::summary(&crate::report::read_record(&record)?)));
     }
-    let all: Vec<&PlannedRun> = plan.iter().collect();
-    s += &format!("all {} runs: {}\n", plan.len(), line(&all));
-    for r in plan.iter().filter(|r| r.state.to_train()) {
-        let what = match (r.state, crate::resume::find(&r.dir)) {
-            (RunState::New, _) => "not started".to_string(),
-            _ if equiarm_train::rundir::RunDirLock::is_held(&r.dir) => "in training now".to_string(),
-            (_, Some(dir)) => match crate::resume::read_state(&dir) {
-                Ok(state) => format!("unfinished, checkpoint after epoch {}", state.epoch),
-                Err(e) => format!("unfinished, unreadable checkpoint ({e})"),
-            },
-            (_, None) => "unfinished, no checkpoint".to_string(),
-        };
-        s += &format!("{what}: {}\n", r.dir.display());
+    if let Some(r) = archived {
+        return Ok(RunState::Archived(crate::cli::summary(r)));
     }
-    Ok(s)
+    if !p.dir.exists() {
+        return Ok(RunState::New);
+    }
+    Ok(RunState::Unfinished(match crate::resume::find(&p.dir) {
+        _ if equiarm_train::rundir::RunDirLock::is_held(&p.dir) => "in training now".to_string(),
+        Some(dir) => match crate::resume::read_state(&dir) {
+            Ok(state) => format!("unfinished, checkpoint after epoch {}", state.epoch),
+            Err(e) => format!("unfinished, unreadable checkpoint ({e})"),
+        },
+        None => "unfinished, no checkpoint".to_string(),
+    }))
 }
 
-/// `rotest grid`: for each setting, its dataset (generated if `DATA/<setting>` has none), then every
-/// run still to train (an unfinished one from its checkpoint; one another process is training is
-/// skipped); then the report. Before each dataset and run, and after each epoch, it asks `stop()`:
-/// when true it returns [`STOPPED_EXIT`] (finished runs kept, the run in training checkpointed, no
-/// report); else 0. Results are printed to stdout.
+/// `rotest status`: where every run stands (finished here, archived in the report, unfinished,
+/// not started), then the counts of each setting and of the grid.
+pub fn status(args: &GridArgs) -> Result<String> {
+    Ok(equiarm_train::grid::status(&args.plan()?, &args.report))
+}
+
+/// The grid as the one grid runner drives it ([`equiarm_train::grid`]): each run trains on a thread
+/// of this process, from its checkpoint if it has one.
+struct RotestGrid<'a> {
+    args: &'a GridArgs,
+    device: Device,
+    every: Duration,
+    /// The dataset of the setting whose runs start now (the plan goes setting by setting).
+    dataset: Option<(Corruptions, Arc<Dataset>)>,
+}
+
+impl GridSpec for RotestGrid<'_> {
+    type Run = (Corruptions, RotestConfig);
+    type Error = RotestError;
+
+    fn title(&self) -> String {
+        "rotest grid".into()
+    }
+
+    fn archive(&self) -> &Path {
+        &self.args.report
+    }
+
+    fn state(&self, p: &PlannedRun) -> Result<RunState> {
+        // a run archived when planned stays so (the grid trains only the others)
+        match &p.state {
+            RunState::Archived(_) if !p.dir.join("run.json").is_file() => Ok(p.state.clone()),
+            _ => state_of(p, None),
+        }
+    }
+
+    fn start(&mut self, p: &PlannedRun) -> Result<Box<dyn Job>> {
+        let (setting, cfg) = p.run.clone();
+        let ds = match &self.dataset {
+            Some((s, ds)) if *s == setting => Arc::clone(ds),
+            _ => {
+                let ds = Arc::new(Dataset::read(&self.args.data_dir(&setting), None)?);
+                self.dataset = Some((setting, Arc::clone(&ds)));
+                ds
+            }
+        };
+        let (device, every, dir) = (self.device.clone(), self.every, p.dir.clone());
+        Ok(Box::new(ThreadJob::spawn(move |stop| {
+            let ckpt = Checkpointing { every, stop };
+            match crate::train::run_with(&ds, &cfg, &device, &dir, Some(&ckpt), &mut |_| {}) {
+                Ok(Outcome::Finished(_)) => JobEnd::Done,
+                Ok(Outcome::Stopped { .. }) => JobEnd::Stopped,
+                Err(e) => JobEnd::Failed(e.to_string()),
+            }
+        })))
+    }
+
+    fn report(&mut self) -> Result<Vec<PathBuf>> {
+        crate::report::write(&self.args.runs, &self.args.report, &crate::cli::bounds_of(&self.args.data)?)
+    }
+}
+
+/// `rotest grid`: each setting's dataset (generated if `DATA/<setting>` has none; the report's
+/// bound line comes from it), then every run still to train, `--parallel` at a time (an unfinished
+/// one from its checkpoint; one another process is training is left to it), then the report. Before
+/// each dataset, and by the runner while runs train, it asks `stop()`: when true it returns
+/// [`STOPPED_EXIT`] (finished runs kept, the runs in training checkpointed at the end of their
+/// epoch, no report); else 0, or 1 when a run failed.
 pub fn run(args: &GridArgs, stop: &dyn Fn() -> bool) -> Result<i32> {
     let plan = args.plan()?;
     let device = equiarm_nn::device::open(&args.opts.device)?;
-    let ckpt = Checkpointing { every: args.opts.checkpoint_every()?, stop };
-    let mut trained = 0usize;
-    let stopped = |next: &Path, trained: usize| {
-        println!(
-            "stopped before {}: {trained} runs trained by this command, the rest not started and the report not \
-             written; the same command continues",
-            next.display()
-        );
-        STOPPED_EXIT
-    };
-    for group in plan.chunk_by(|a, b| a.setting == b.setting) {
-        let setting = &group[0].setting;
+    let every = args.opts.checkpoint_every()?;
+    let mut settings: Vec<&Corruptions> = plan.iter().map(|p| &p.run.0).collect();
+    settings.dedup();
+    for setting in settings {
         let dir = args.data_dir(setting);
         if stop() {
-            return Ok(stopped(&dir, trained));
+            println!("stopped before the dataset {}: no run trained; the same command continues", dir.display());
+            return Ok(STOPPED_EXIT);
         }
         if !dir.join(crate::dataset::FILE_NAME).is_file() {
             let ds = generate(&PairConfig { size: 152, supersample: 2, corruptions: setting.clone() }, args.pairs, 0)?;
             println!("{}", ds.write(&dir)?.display());
         }
-        let left: Vec<&PlannedRun> = group.iter().filter(|r| r.state.to_train()).collect();
-        // the dataset is read only for a setting with runs left (it is generated regardless: the
-        // report's bound line comes from it)
-        let ds = if left.is_empty() { continue } else { Dataset::read(&dir, None)? };
-        for r in left {
-            if stop() {
-                return Ok(stopped(&r.dir, trained));
-            }
-            // finished meanwhile by another grid on the same runs directory
-            if r.dir.join("run.json").is_file() {
-                continue;
-            }
-            // (an unreadable checkpoint is reported by run_with, naming its file)
-            if let Some(Ok(state)) = crate::resume::find(&r.dir).map(|d| crate::resume::read_state(&d)) {
-                println!("{}: continuing from its checkpoint after epoch {}", r.dir.display(), state.epoch);
-            }
-            match crate::train::run_with(&ds, &r.cfg, &device, &r.dir, Some(&ckpt), &mut |_| {}) {
-                Ok(Outcome::Finished(rec)) => {
-                    trained += 1;
-                    println!("{}", crate::cli::summary(&rec));
-                }
-                Ok(Outcome::Stopped { epoch }) => {
-                    println!(
-                        "stopped in {} after epoch {epoch}, its checkpoint written: {trained} runs trained by this \
-                         command, the report not written; the same command continues",
-                        r.dir.display()
-                    );
-                    return Ok(STOPPED_EXIT);
-                }
-                // in training by another grid on the same runs directory
-                Err(RotestError::Busy { path }) => {
-                    println!("{}: in training by another process, skipped", path.display())
-                }
-                Err(e) => return Err(e),
-            }
-        }
     }
-    for f in crate::report::write(&args.runs, &args.report, &crate::cli::bounds_of(&args.data)?)? {
-        println!("{}", f.display());
+    let mut grid = RotestGrid { args, device, every, dataset: None };
+    // a run trained on a thread ends with this process: a run held is another process's
+    let opts = RunnerOptions { parallel: args.parallel, wait_for_locked: Duration::ZERO };
+    let summary = equiarm_train::grid::run(&mut grid, plan, &opts, stop)?;
+    for line in summary.lines(&grid.title()) {
+        println!("{line}");
     }
-    Ok(0)
+    Ok(summary.exit_code())
 }

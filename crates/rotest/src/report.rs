@@ -55,15 +55,14 @@ pub fn collect_runs(dir: &Path) -> Result<Vec<(PathBuf, RotestRecord)>> {
         }
     }
     files.sort();
-    files
-        .into_iter()
-        .map(|p| {
-            let text = std::fs::read(&p).map_err(io(&p))?;
-            let r = serde_json::from_slice(&text)
-                .map_err(|e| RotestError::Format { path: p.clone(), message: format!("not a run file: {e}") })?;
-            Ok((p, r))
-        })
-        .collect()
+    files.into_iter().map(|p| Ok((p.clone(), read_record(&p)?))).collect()
+}
+
+/// One run's record (its `run.json`).
+pub fn read_record(path: &Path) -> Result<RotestRecord> {
+    let text = std::fs::read(path).map_err(io(path))?;
+    serde_json::from_slice(&text)
+        .map_err(|e| RotestError::Format { path: path.to_path_buf(), message: format!("not a run file: {e}") })
 }
 
 /// Test accuracies by setting → variant → training pairs.

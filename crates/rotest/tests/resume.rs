@@ -140,20 +140,21 @@ fn a_run_directory_another_process_trains_in_is_refused() {
 fn a_grid_stopped_inside_a_run_continues_it_from_its_checkpoint() {
     use equiarm_rotest::cli::{ClassifierVariant, RotestCommand, run};
     use equiarm_rotest::grid::status;
+    const EPOCHS: usize = 1000;
     let root = scratch("grid");
     data(12, 7).write(&root.join("data").join("none")).unwrap();
-    let args = common::grid_args(&root, vec![ClassifierVariant::Cnn], vec![0, 1], 4);
+    let args = common::grid_args(&root, vec![ClassifierVariant::Cnn], vec![0, 1], EPOCHS);
     let seed_dir = |s: u64| root.join("runs").join("none").join("cnn").join("4").join(format!("s{s}"));
-    // asked before the dataset and before seed 0, then after seed 0's epochs 1 and 2: stop there
-    let asked = std::cell::Cell::new(0);
-    let stop = || {
-        asked.set(asked.get() + 1);
-        asked.get() >= 4
-    };
+    // the stop comes once seed 0 has started: it stops at the end of the epoch in training
+    let stop = || seed_dir(0).exists();
     assert_eq!(run(RotestCommand::Grid(args.clone()), &stop).unwrap(), equiarm_train::STOPPED_EXIT);
     assert!(!seed_dir(0).join("run.json").exists() && !seed_dir(1).exists());
+    let resume = equiarm_rotest::resume::find(&seed_dir(0)).expect("a checkpoint");
+    let epoch = equiarm_rotest::resume::read_state(&resume).unwrap().epoch;
+    assert!((1..EPOCHS).contains(&epoch), "stopped after epoch {epoch}");
     let text = status(&args).unwrap();
-    assert!(text.contains(&format!("unfinished, checkpoint after epoch 2: {}\n", seed_dir(0).display())), "{text}");
+    let line = format!("unfinished, checkpoint after epoch {epoch}: {}\n", seed_dir(0).display());
+    assert!(text.contains(&line), "{text}");
 
     // seed 1 is held by another process: the grid continues seed 0, skips seed 1 and writes the
     // report of what is finished
@@ -162,7 +163,7 @@ fn a_grid_stopped_inside_a_run_continues_it_from_its_checkpoint() {
     assert!(text.contains(&format!("in training now: {}\n", seed_dir(1).display())), "{text}");
     assert_eq!(run(RotestCommand::Grid(args.clone()), &|| false).unwrap(), 0);
     let rec: RotestRecord = serde_json::from_slice(&std::fs::read(seed_dir(0).join("run.json")).unwrap()).unwrap();
-    assert_eq!(rec.history.iter().map(|e| e.epoch).collect::<Vec<_>>(), [1, 2, 3, 4]);
+    assert_eq!(rec.history.iter().map(|e| e.epoch).collect::<Vec<_>>(), (1..=EPOCHS).collect::<Vec<_>>());
     assert!(!seed_dir(1).join("run.json").exists());
     drop(claim);
     assert_eq!(run(RotestCommand::Grid(args.clone()), &|| false).unwrap(), 0);

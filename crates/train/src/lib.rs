@@ -3,6 +3,7 @@
 //! - [`inprocess`]: the transport-free training loop (`equiarm train --in-process`).
 //! - [`env`](mod@env): the simulator side: env configs, episode seeds, frames, expert demonstrations.
 //! - [`evaluation`]: greedy evaluations, in-process or from published episode results.
+//! - [`grid`]: the one grid runner (experiment grids, the rotation experiment) and its status.
 //! - [`record`], [`rundir`]: what a run writes (config, metrics, evaluations, checkpoints) and its
 //!   directory's layout and lock.
 //! - [`config`]: the config checks that need the simulator.
@@ -35,6 +36,7 @@ pub mod device_check;
 pub mod env;
 pub mod evaluation;
 pub mod gate;
+pub mod grid;
 pub mod ingest;
 pub mod inprocess;
 pub mod lockstep;

@@ -47,5 +47,6 @@ pub fn grid_args(root: &Path, variants: Vec<ClassifierVariant>, seeds: Vec<u64>,
         pairs: 12,
         opts,
         report: root.join("report"),
+        parallel: 1,
     }
 }
