@@ -18,14 +18,9 @@ use equiarm_types::OBS_PLANES;
 /// A target could not be set up (its seeds or its harness).
 #[derive(Debug, thiserror::Error)]
 pub enum SetupError {
-    /// Reading or writing a scratch file failed.
-    #[error("{}: {cause}", path.display())]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The cause.
-        cause: std::io::Error,
-    },
+    /// Reading or writing a scratch file failed (the file, and the cause).
+    #[error(transparent)]
+    Io(#[from] equiarm_types::files::FileError),
     /// The project's own code refused to make a seed or the state a harness needs.
     #[error("{what}: {message}")]
     Project {
@@ -37,10 +32,6 @@ pub enum SetupError {
 }
 
 impl SetupError {
-    fn io(path: &Path) -> impl FnOnce(std::io::Error) -> SetupError + '_ {
-        move |cause| SetupError::Io { path: path.to_path_buf(), cause }
-    }
-
     fn project(what: &'static str) -> impl FnOnce(&dyn std::fmt::Display) -> SetupError {
         move |e| SetupError::Project { what, message: e.to_string() }
     }
@@ -474,7 +465,7 @@ fn bag_seeds(scratch: &Path) -> Result<Vec<Vec<u8>>, SetupError> {
     for (i, (compression, finish)) in cases.into_iter().enumerate() {
         let dir = scratch.join(format!("seed_bag{i}"));
         if dir.exists() {
-            std::fs::remove_dir_all(&dir).map_err(SetupError::io(&dir))?;
+            std::fs::remove_dir_all(&dir).map_err(equiarm_types::files::at(&dir))?;
         }
         let opts = WriterOptions { compression, chunk_size: 600, zstd_level: 1, ..WriterOptions::default() };
         let mut w = Writer::create(&dir, opts).map_err(|e| bag(&e))?;
@@ -502,11 +493,11 @@ fn bag_seeds(scratch: &Path) -> Result<Vec<Vec<u8>>, SetupError> {
             drop(w);
         }
         let file = std::fs::read_dir(&dir)
-            .map_err(SetupError::io(&dir))?
+            .map_err(equiarm_types::files::at(&dir))?
             .filter_map(|e| e.ok().map(|e| e.path()))
             .find(|p| p.extension().is_some_and(|x| x == "mcap"))
             .ok_or_else(|| SetupError::Project { what: "writing a seed bag", message: "no .mcap file".into() })?;
-        out.push(std::fs::read(&file).map_err(SetupError::io(&file))?);
+        out.push(std::fs::read(&file).map_err(equiarm_types::files::at(&file))?);
     }
     Ok(out)
 }
@@ -701,10 +692,10 @@ fn tensorfile_seeds(scratch: &Path) -> Result<Vec<Vec<u8>>, SetupError> {
         ("empty".to_string(), vec![0, 2], vec![]),
     ];
     let meta = [("step".to_string(), "42".to_string()), ("lr".to_string(), "0.003".to_string())];
-    equiarm_sac::tensorfile::write(&path, &tensors, &meta).map_err(SetupError::io(&path))?;
-    let one = std::fs::read(&path).map_err(SetupError::io(&path))?;
-    equiarm_sac::tensorfile::write(&path, &tensors[..1], &[]).map_err(SetupError::io(&path))?;
-    let two = std::fs::read(&path).map_err(SetupError::io(&path))?;
+    equiarm_sac::tensorfile::write(&path, &tensors, &meta)?;
+    let one = std::fs::read(&path).map_err(equiarm_types::files::at(&path))?;
+    equiarm_sac::tensorfile::write(&path, &tensors[..1], &[])?;
+    let two = std::fs::read(&path).map_err(equiarm_types::files::at(&path))?;
     Ok(vec![one, two])
 }
 
@@ -780,12 +771,12 @@ fn resume_seeds(scratch: &Path) -> Result<Vec<Vec<u8>>, SetupError> {
     for (i, name) in CHECKPOINT_FILES.iter().enumerate() {
         let path = dir.join(name);
         let mut seed = vec![i as u8];
-        seed.extend(std::fs::read(&path).map_err(SetupError::io(&path))?);
+        seed.extend(std::fs::read(&path).map_err(equiarm_types::files::at(&path))?);
         out.push(seed);
     }
     let replay = &out[REPLAY_BODY - 1][1..];
     let body = zstd::decode_all(&replay[REPLAY_HEAD.min(replay.len())..])
-        .map_err(SetupError::io(&dir.join("replay.bin.zst")))?;
+        .map_err(equiarm_types::files::at(&dir.join("replay.bin.zst")))?;
     let mut seed = vec![REPLAY_BODY as u8];
     seed.extend_from_slice(&replay[..REPLAY_HEAD]);
     seed.extend(body);
@@ -803,11 +794,11 @@ struct Resume {
 fn resume_harness(scratch: &Path) -> Result<Box<dyn Harness>, SetupError> {
     let seeds = resume_seeds(scratch)?;
     let dir = scratch.join("checkpoint");
-    std::fs::create_dir_all(&dir).map_err(SetupError::io(&dir))?;
+    std::fs::create_dir_all(&dir).map_err(equiarm_types::files::at(&dir))?;
     let originals: Vec<Vec<u8>> = seeds.iter().take(CHECKPOINT_FILES.len()).map(|s| s[1..].to_vec()).collect();
     for (name, bytes) in CHECKPOINT_FILES.iter().zip(&originals) {
         let path = dir.join(name);
-        std::fs::write(&path, bytes).map_err(SetupError::io(&path))?;
+        std::fs::write(&path, bytes).map_err(equiarm_types::files::at(&path))?;
     }
     Ok(Box::new(Resume { learner: tiny_learner()?, dir, originals, changed: None }))
 }

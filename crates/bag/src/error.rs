@@ -2,17 +2,14 @@
 
 use std::path::PathBuf;
 
+use equiarm_types::files::FileError;
+
 /// What went wrong with a bag, and where.
 #[derive(Debug, thiserror::Error)]
 pub enum BagError {
-    /// Reading or writing the file system failed.
-    #[error("{path}: {cause}")]
-    Io {
-        /// The file or directory being read, written, created or renamed.
-        path: PathBuf,
-        /// The I/O error.
-        cause: std::io::Error,
-    },
+    /// Reading or writing the file system failed (the file or directory, and the cause).
+    #[error(transparent)]
+    Io(#[from] FileError),
     /// rosbag2 never records into an existing directory; neither do we.
     #[error("{path}: already exists and is not empty (a bag is written into a new directory)")]
     Exists {
@@ -86,11 +83,6 @@ pub enum BagError {
 }
 
 impl BagError {
-    pub(crate) fn io(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> BagError {
-        let path = path.into();
-        move |cause| BagError::Io { path, cause }
-    }
-
     pub(crate) fn write(path: impl Into<PathBuf>) -> impl FnOnce(mcap::McapError) -> BagError {
         let path = path.into();
         move |cause| BagError::Write { path, cause }

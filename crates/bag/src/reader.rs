@@ -15,6 +15,8 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use equiarm_types::files::at;
+
 use crate::{BagError, Nanos};
 
 const MAGIC: &[u8] = b"\x89MCAP0\r\n";
@@ -155,12 +157,12 @@ impl Reader {
     /// Opens a bag directory or a single `.mcap` file. Fails, naming the file, if it is empty or not
     /// MCAP.
     pub fn open(path: &Path) -> Result<Self, BagError> {
-        let meta = std::fs::metadata(path).map_err(BagError::io(path))?;
+        let meta = std::fs::metadata(path).map_err(at(path))?;
         let mut paths = Vec::new();
         if meta.is_dir() {
             let mut indexed = Vec::new();
-            for e in std::fs::read_dir(path).map_err(BagError::io(path))? {
-                let e = e.map_err(BagError::io(path))?;
+            for e in std::fs::read_dir(path).map_err(at(path))? {
+                let e = e.map_err(at(path))?;
                 let name = e.file_name().to_string_lossy().to_string();
                 if let Some(i) = split_index(&name) {
                     indexed.push((i, e.path()));
@@ -178,14 +180,14 @@ impl Reader {
         }
         let mut files = Vec::new();
         for p in paths {
-            let f = File::open(&p).map_err(BagError::io(&p))?;
-            let len = f.metadata().map_err(BagError::io(&p))?.len();
+            let f = File::open(&p).map_err(at(&p))?;
+            let len = f.metadata().map_err(at(&p))?.len();
             if len == 0 {
                 return Err(BagError::Empty { path: p });
             }
             // SAFETY: the map is read-only; the crate docs tell users not to modify a bag while it is
             // read (a concurrent truncation could fault, as with any mmap reader).
-            let map = unsafe { memmap2::Mmap::map(&f) }.map_err(BagError::io(&p))?;
+            let map = unsafe { memmap2::Mmap::map(&f) }.map_err(at(&p))?;
             if !map.starts_with(MAGIC) {
                 return Err(BagError::NotMcap { path: p });
             }

@@ -5,6 +5,8 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+use equiarm_types::files::{at, replace};
+
 use crate::metadata::{BagMeta, FileMeta, TopicMeta};
 use crate::{BagError, Nanos};
 
@@ -147,12 +149,12 @@ impl Writer {
     /// Creates the bag directory `dir` (it must not exist, or be empty) and its first file.
     pub fn create(dir: &Path, opts: WriterOptions) -> Result<Self, BagError> {
         if dir.exists() {
-            let mut entries = std::fs::read_dir(dir).map_err(BagError::io(dir))?;
+            let mut entries = std::fs::read_dir(dir).map_err(at(dir))?;
             if entries.next().is_some() {
                 return Err(BagError::Exists { path: dir.into() });
             }
         }
-        std::fs::create_dir_all(dir).map_err(BagError::io(dir))?;
+        std::fs::create_dir_all(dir).map_err(at(dir))?;
         let name = dir
             .file_name()
             .map(|n| n.to_string_lossy().to_string())
@@ -206,7 +208,7 @@ impl Writer {
     fn open_file(&mut self) -> Result<(), BagError> {
         let file_name = format!("{}_{}.mcap", self.name, self.files.len());
         let path = self.dir.join(&file_name);
-        let file = File::create(&path).map_err(BagError::io(&path))?;
+        let file = File::create(&path).map_err(at(&path))?;
         let mut options = mcap::WriteOptions::new()
             .profile("ros2")
             .library(concat!("equiarm_bag ", env!("CARGO_PKG_VERSION")))
@@ -334,9 +336,9 @@ impl Writer {
             f.mcap.write_metadata(&record).map_err(BagError::write(&f.path))?;
             f.mcap.finish().map_err(BagError::write(&f.path))?;
             let mut buf = f.mcap.into_inner();
-            buf.flush().map_err(BagError::io(&f.path))?;
-            let file = buf.into_inner().map_err(|e| BagError::Io { path: f.path.clone(), cause: e.into_error() })?;
-            file.sync_all().map_err(BagError::io(&f.path))?;
+            buf.flush().map_err(at(&f.path))?;
+            let file = buf.into_inner().map_err(|e| at(&f.path)(e.into_error()))?;
+            file.sync_all().map_err(at(&f.path))?;
         }
         Ok(())
     }
@@ -351,7 +353,7 @@ impl Writer {
         self.close_file()?;
         self.finished = true;
         let yaml = self.meta().yaml_file();
-        write_atomically(&self.dir.join("metadata.yaml"), yaml.as_bytes())?;
+        replace(&self.dir.join("metadata.yaml"), yaml)?;
         Ok(BagSummary {
             dir: self.dir.clone(),
             files: self.files.iter().map(|f| f.path.clone()).collect(),
@@ -370,19 +372,4 @@ impl Drop for Writer {
             log::error!("finishing bag {} on drop: {e}", self.dir.display());
         }
     }
-}
-
-/// Writes `path` through `path.tmp` + rename, syncing file and directory.
-pub(crate) fn write_atomically(path: &Path, data: &[u8]) -> Result<(), BagError> {
-    let tmp = path.with_extension("yaml.tmp");
-    let mut f = File::create(&tmp).map_err(BagError::io(&tmp))?;
-    f.write_all(data).map_err(BagError::io(&tmp))?;
-    f.sync_all().map_err(BagError::io(&tmp))?;
-    std::fs::rename(&tmp, path).map_err(BagError::io(path))?;
-    if let Some(dir) = path.parent()
-        && let Ok(d) = File::open(dir)
-    {
-        let _ = d.sync_all();
-    }
-    Ok(())
 }

@@ -109,8 +109,7 @@ impl Where {
             grid: grid.only(only)?,
             archive: crate::report::read_archives(&self.archive)?,
             archive_dir: self.archive.clone(),
-            exe: std::env::current_exe()
-                .map_err(|e| crate::ExperimentError::Io { path: "equiarm".into(), message: e.to_string() })?,
+            exe: std::env::current_exe().map_err(equiarm_types::files::at("equiarm (this program's executable)"))?,
             threads: 1,
             report: None,
         })

@@ -21,14 +21,15 @@ pub enum ExperimentError {
         /// What is wrong and the way out.
         message: String,
     },
-    /// Reading or writing a file failed.
-    #[error("{path}: {message}")]
-    Io {
-        /// The file or directory.
-        path: PathBuf,
-        /// The cause.
-        message: String,
-    },
+    /// Reading or writing a file failed (the file, and the cause).
+    #[error(transparent)]
+    Io(#[from] equiarm_types::files::FileError),
+    /// A JSON file (a run's config or result, a report's archive) does not read or write.
+    #[error(transparent)]
+    Json(#[from] equiarm_sac::learner::JsonFileError),
+    /// A figure could not be drawn or written.
+    #[error(transparent)]
+    Plot(#[from] equiarm_train::plot::PlotError),
     /// The grid runner could not lock or watch a run.
     #[error(transparent)]
     Runner(#[from] equiarm_train::grid::GridError),
@@ -39,9 +40,3 @@ pub enum ExperimentError {
 
 /// The runner's results.
 pub type Result<T, E = ExperimentError> = std::result::Result<T, E>;
-
-/// An [`ExperimentError::Io`] maker for `path`.
-pub fn io(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> ExperimentError {
-    let path = path.into();
-    move |e| ExperimentError::Io { path, message: e.to_string() }
-}

@@ -165,7 +165,7 @@ impl Grid {
     /// Reads and checks `path`: every name is known, every cell's config passes
     /// `equiarm_train::config::check`. Errors name the file and the key.
     pub fn read(path: &Path) -> Result<Grid> {
-        let text = std::fs::read_to_string(path).map_err(crate::error::io(path))?;
+        let text = std::fs::read_to_string(path).map_err(equiarm_types::files::at(path))?;
         Grid::parse(path, &text)
     }
 

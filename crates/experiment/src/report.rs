@@ -15,11 +15,13 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use equiarm_sac::config::TrainConfig;
+use equiarm_sac::learner::{read_json, write_json};
 use equiarm_train::evaluation::EvalResult;
 use equiarm_train::plot::{Chart, Series, mean_se, palette, write_png};
+use equiarm_types::files::{at, replace};
 use serde::{Deserialize, Serialize};
 
-use crate::error::{ExperimentError, Result, io};
+use crate::error::{ExperimentError, Result};
 use crate::grid::{Cell, Grid, VARIANTS, Variant};
 use crate::runner::{RESULT_FILE, RunResult, check_config, read_result};
 
@@ -66,15 +68,13 @@ pub fn read_archives(dir: &Path) -> Result<Archive> {
         return Ok(out);
     }
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(io(dir))?
+        .map_err(at(dir))?
         .filter_map(|e| e.ok().map(|e| e.path().join(ARCHIVE_FILE)))
         .filter(|p| p.is_file())
         .collect();
     files.sort();
     for f in files {
-        let text = std::fs::read(&f).map_err(io(&f))?;
-        let runs: Vec<Archived> = serde_json::from_slice(&text)
-            .map_err(|e| ExperimentError::Io { path: f.clone(), message: format!("not a run archive: {e}") })?;
+        let runs: Vec<Archived> = read_json(&f)?;
         for a in runs {
             out.entry(a.run.clone()).or_insert_with(Vec::new).push(a);
         }
@@ -133,7 +133,7 @@ type GroupKey = (String, String, String);
 /// have them finished.
 pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &str) -> Result<Vec<PathBuf>> {
     let views = collect(grid, runs, archive)?;
-    std::fs::create_dir_all(out).map_err(io(out))?;
+    std::fs::create_dir_all(out).map_err(at(out))?;
     let mut files = Vec::new();
     let mut keep = Vec::new();
     for v in &views {
@@ -147,9 +147,7 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
         }
     }
     let archive_file = out.join(ARCHIVE_FILE);
-    let json = serde_json::to_vec_pretty(&keep)
-        .map_err(|e| ExperimentError::Io { path: archive_file.clone(), message: e.to_string() })?;
-    std::fs::write(&archive_file, json).map_err(io(&archive_file))?;
+    write_json(&archive_file, &keep)?;
     // task × view × corruption → variant → runs
     let mut groups: BTreeMap<GroupKey, BTreeMap<usize, Vec<&RunView>>> = BTreeMap::new();
     for v in &views {
@@ -316,7 +314,7 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
         );
     }
     let readme = out.join("README.md");
-    std::fs::write(&readme, md).map_err(io(&readme))?;
+    replace(&readme, md)?;
     files.insert(0, readme);
     files.push(archive_file);
     Ok(files)
@@ -338,7 +336,7 @@ fn draw(out: &Path, name: &str, mut chart: Chart, metric: &str, series: &[Series
         chart.y_range = Some((0.0, 1.0));
     }
     let file = out.join(name);
-    write_png(&file, &chart, series).map_err(|e| ExperimentError::Io { path: file.clone(), message: e.to_string() })?;
+    write_png(&file, &chart, series)?;
     Ok(file)
 }
 

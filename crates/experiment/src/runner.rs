@@ -27,9 +27,10 @@ use equiarm_train::evaluation::{EvalResult, Stream, evaluate_on};
 use equiarm_train::grid::{Grid as GridSpec, GridError, Job, JobEnd, Planned, RunState};
 use equiarm_train::inprocess::RunOptions;
 use equiarm_train::rundir::{RUN_FILES, RunDirLock, find_checkpoint};
+use equiarm_types::files::at;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{ExperimentError, Result, io};
+use crate::error::{ExperimentError, Result};
 use crate::grid::{Cell, Grid};
 use crate::report::Archive;
 
@@ -176,7 +177,7 @@ pub fn run_one(
         heldout_seconds: t0.elapsed().as_secs_f64(),
     };
     let path = dir.join(RESULT_FILE);
-    write_json(&path, &result).map_err(|e| ExperimentError::Io { path: path.clone(), message: e.to_string() })?;
+    write_json(&path, &result)?;
     prune_checkpoints(dir)?;
     Ok(Some(result))
 }
@@ -186,11 +187,11 @@ pub fn run_one(
 fn prune_checkpoints(dir: &Path) -> Result<()> {
     let latest = find_checkpoint(dir)?;
     let root = dir.join("checkpoints");
-    for e in std::fs::read_dir(&root).map_err(io(&root))? {
-        let p = e.map_err(io(&root))?.path();
+    for e in std::fs::read_dir(&root).map_err(at(&root))? {
+        let p = e.map_err(at(&root))?.path();
         let is_step = p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with("step_"));
         if p.is_dir() && is_step && p != latest {
-            std::fs::remove_dir_all(&p).map_err(io(&p))?;
+            std::fs::remove_dir_all(&p).map_err(at(&p))?;
         }
     }
     Ok(())
@@ -258,13 +259,12 @@ impl GridSpec for ExperimentGrid {
             for f in RUN_FILES.iter().chain(&["learning_curve.png"]) {
                 let path = p.dir.join(f);
                 if path.is_dir() {
-                    std::fs::remove_dir_all(&path).map_err(io(&path))?;
+                    std::fs::remove_dir_all(&path).map_err(at(&path))?;
                 } else if path.exists() {
-                    std::fs::remove_file(&path).map_err(io(&path))?;
+                    std::fs::remove_file(&path).map_err(at(&path))?;
                 }
             }
-            write_json(&p.dir.join("config.json"), &p.run.1)
-                .map_err(|e| ExperimentError::Io { path: p.dir.join("config.json"), message: e.to_string() })?;
+            write_json(&p.dir.join("config.json"), &p.run.1)?;
         }
         let child = spawn(&self.exe, self.threads, &self.grid, &p.dir)?;
         Ok(Box::new(ChildJob { child, log: p.dir.join(LOG_FILE) }))
@@ -318,8 +318,8 @@ pub use equiarm_train::STOPPED_EXIT;
 
 fn spawn(exe: &Path, threads: usize, grid: &Grid, dir: &Path) -> Result<Child> {
     let log_path = dir.join(LOG_FILE);
-    let log = std::fs::OpenOptions::new().create(true).append(true).open(&log_path).map_err(io(&log_path))?;
-    let err = log.try_clone().map_err(io(&log_path))?;
+    let log = std::fs::OpenOptions::new().create(true).append(true).open(&log_path).map_err(at(&log_path))?;
+    let err = log.try_clone().map_err(at(&log_path))?;
     Command::new(exe)
         .args(["experiment", "run-one"])
         .arg(dir)
@@ -330,7 +330,7 @@ fn spawn(exe: &Path, threads: usize, grid: &Grid, dir: &Path) -> Result<Child> {
         .stdout(log)
         .stderr(err)
         .spawn()
-        .map_err(|e| ExperimentError::Io { path: exe.to_path_buf(), message: format!("starting a run: {e}") })
+        .map_err(|e| at(exe)(e).into())
 }
 
 fn signal(child: &Child, sig: libc::c_int) {

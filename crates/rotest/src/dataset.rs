@@ -22,7 +22,8 @@ use equiarm_sim::rotest::{PairMeta, RgbdImage};
 use half::f16;
 use rayon::prelude::*;
 
-use crate::error::{Result, RotestError, io};
+use crate::error::{Result, RotestError};
+use equiarm_types::files::at;
 
 /// The file's magic bytes.
 pub const MAGIC: &[u8; 8] = b"EQROTEST";
@@ -138,11 +139,11 @@ impl Dataset {
 
     /// Writes `dir/pairs.rotest` (creating `dir`); returns the file's path.
     pub fn write(&self, dir: &Path) -> Result<PathBuf> {
-        std::fs::create_dir_all(dir).map_err(io(dir))?;
+        std::fs::create_dir_all(dir).map_err(at(dir))?;
         let path = dir.join(FILE_NAME);
         let size = self.header.size;
         let blobs: Vec<Vec<u8>> =
-            self.pairs.par_iter().map(|p| encode_pair(p, size)).collect::<Result<_, _>>().map_err(io(&path))?;
+            self.pairs.par_iter().map(|p| encode_pair(p, size)).collect::<Result<_, _>>().map_err(at(&path))?;
         let mut header = self.header.clone();
         let mut offset = 0u64;
         header.chunks = blobs
@@ -155,19 +156,13 @@ impl Dataset {
             .collect();
         let json = serde_json::to_vec(&header)
             .map_err(|e| RotestError::Format { path: path.clone(), message: e.to_string() })?;
-        let tmp = dir.join(format!("{FILE_NAME}.partial"));
-        let mut f = std::io::BufWriter::new(std::fs::File::create(&tmp).map_err(io(&tmp))?);
-        let mut put = |bytes: &[u8]| f.write_all(bytes).map_err(io(&tmp));
-        put(MAGIC)?;
-        put(&VERSION.to_le_bytes())?;
-        put(&(json.len() as u64).to_le_bytes())?;
-        put(&json)?;
-        for b in &blobs {
-            put(b)?;
-        }
-        f.flush().map_err(io(&tmp))?;
-        drop(f);
-        std::fs::rename(&tmp, &path).map_err(io(&path))?;
+        equiarm_types::files::write_atomically(&path, |f| {
+            f.write_all(MAGIC)?;
+            f.write_all(&VERSION.to_le_bytes())?;
+            f.write_all(&(json.len() as u64).to_le_bytes())?;
+            f.write_all(&json)?;
+            blobs.iter().try_for_each(|b| f.write_all(b))
+        })?;
         Ok(path)
     }
 
@@ -176,7 +171,7 @@ impl Dataset {
         use std::io::Read;
         let path = if path.is_dir() { path.join(FILE_NAME) } else { path.to_path_buf() };
         let bad = |message: String| RotestError::Format { path: path.clone(), message };
-        let mut f = std::fs::File::open(&path).map_err(io(&path))?;
+        let mut f = std::fs::File::open(&path).map_err(at(&path))?;
         let mut head = [0u8; 20];
         f.read_exact(&mut head).map_err(|_| bad("shorter than a dataset header".into()))?;
         if &head[..8] != MAGIC {
@@ -188,7 +183,7 @@ impl Dataset {
         }
         let n = u64::from_le_bytes(head[12..20].try_into().expect("8 bytes"));
         let mut json = Vec::new();
-        f.take(n).read_to_end(&mut json).map_err(io(&path))?;
+        f.take(n).read_to_end(&mut json).map_err(at(&path))?;
         if json.len() as u64 != n {
             return Err(bad(format!("header of {n} bytes runs past the end of the file (truncated?)")));
         }
@@ -201,7 +196,7 @@ impl Dataset {
     /// file and the pair.
     pub fn read(path: &Path, limit: Option<usize>) -> Result<Self> {
         let path = if path.is_dir() { path.join(FILE_NAME) } else { path.to_path_buf() };
-        let bytes = std::fs::read(&path).map_err(io(&path))?;
+        let bytes = std::fs::read(&path).map_err(at(&path))?;
         let bad = |message: String| RotestError::Format { path: path.clone(), message };
         if bytes.len() < 20 || &bytes[..8] != MAGIC {
             return Err(bad(format!("not a rotation-estimation dataset (no `{}` magic)", "EQROTEST")));

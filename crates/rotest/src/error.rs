@@ -6,14 +6,9 @@ use std::path::PathBuf;
 /// Everything that can go wrong in `equiarm_rotest`.
 #[derive(Debug, thiserror::Error)]
 pub enum RotestError {
-    /// Reading or writing a file or directory failed.
-    #[error("{path}: {error}")]
-    Io {
-        /// The file or directory.
-        path: PathBuf,
-        /// The I/O error (in the message, not chained as a source, so it is printed once).
-        error: std::io::Error,
-    },
+    /// Reading or writing a file or directory failed (the file, and the cause).
+    #[error(transparent)]
+    Io(#[from] equiarm_types::files::FileError),
     /// A file is not what it should be (not a dataset, a damaged chunk, a bad run file...).
     #[error("{path}: {message}")]
     Format {
@@ -38,6 +33,9 @@ pub enum RotestError {
         /// The run directory.
         path: PathBuf,
     },
+    /// A run directory could not be claimed.
+    #[error(transparent)]
+    Train(#[from] equiarm_train::TrainError),
     /// The grid runner could not lock or watch a run.
     #[error(transparent)]
     Runner(#[from] equiarm_train::grid::GridError),
@@ -68,8 +66,3 @@ pub enum RotestError {
 
 /// `Result` with [`RotestError`].
 pub type Result<T, E = RotestError> = std::result::Result<T, E>;
-
-/// Maps an I/O error on `path` to [`RotestError::Io`].
-pub(crate) fn io(path: &std::path::Path) -> impl FnOnce(std::io::Error) -> RotestError + '_ {
-    move |error| RotestError::Io { path: path.to_path_buf(), error }
-}

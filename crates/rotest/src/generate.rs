@@ -7,7 +7,8 @@ use equiarm_sim::rotest::{Corruptions, Pair, PairConfig, generate_pair};
 use rayon::prelude::*;
 
 use crate::dataset::{Dataset, Header, StoredImage, StoredPair, pair_seed};
-use crate::error::{Result, RotestError, io};
+use crate::error::{Result, RotestError};
+use equiarm_types::files::at;
 
 /// Largest number of pairs one dataset may hold.
 pub const MAX_PAIRS: usize = 1_000_000;
@@ -50,7 +51,7 @@ pub fn setting_file_stem(c: &Corruptions) -> String {
 /// before and after, then the depth images before and after (grey, nearer is brighter, scaled per
 /// image), separated by 4 white pixels.
 pub fn write_snapshot(ds: &Dataset, rows: usize, dir: &Path, stem: &str) -> Result<PathBuf> {
-    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    std::fs::create_dir_all(dir).map_err(at(dir))?;
     let path = dir.join(format!("{stem}.png"));
     let s = ds.header.size;
     let rows = rows.min(ds.len()).max(1);

@@ -12,8 +12,9 @@ use plotters::prelude::*;
 
 use equiarm_sim::rotest::PairCorruption;
 
-use crate::error::{Result, RotestError, io};
+use crate::error::{Result, RotestError};
 use crate::train::{ClassifierKind, RotestConfig, RotestRecord};
+use equiarm_types::files::at;
 
 /// The variant name of the C8 network.
 pub const EQUI: &str = "Equi";
@@ -45,8 +46,8 @@ pub fn collect_runs(dir: &Path) -> Result<Vec<(PathBuf, RotestRecord)>> {
     let mut files = Vec::new();
     let mut stack = vec![dir.to_path_buf()];
     while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).map_err(io(&d))? {
-            let p = e.map_err(io(&d))?.path();
+        for e in std::fs::read_dir(&d).map_err(at(&d))? {
+            let p = e.map_err(at(&d))?.path();
             if p.is_dir() {
                 stack.push(p);
             } else if p.file_name().is_some_and(|n| n == "run.json") {
@@ -60,7 +61,7 @@ pub fn collect_runs(dir: &Path) -> Result<Vec<(PathBuf, RotestRecord)>> {
 
 /// One run's record (its `run.json`).
 pub fn read_record(path: &Path) -> Result<RotestRecord> {
-    let text = std::fs::read(path).map_err(io(path))?;
+    let text = std::fs::read(path).map_err(at(path))?;
     serde_json::from_slice(&text)
         .map_err(|e| RotestError::Format { path: path.to_path_buf(), message: format!("not a run file: {e}") })
 }
@@ -468,7 +469,7 @@ pub fn read_archive(path: &Path) -> Result<Vec<RotestRecord>> {
     if !path.is_file() {
         return Ok(Vec::new());
     }
-    let text = std::fs::read(path).map_err(io(path))?;
+    let text = std::fs::read(path).map_err(at(path))?;
     serde_json::from_slice(&text)
         .map_err(|e| RotestError::Format { path: path.to_path_buf(), message: format!("not a run archive: {e}") })
 }
@@ -493,7 +494,7 @@ pub fn write(runs_dir: &Path, out: &Path, bounds: &BTreeMap<String, f64>) -> Res
         });
     }
     let t = table(&runs);
-    std::fs::create_dir_all(out).map_err(io(out))?;
+    std::fs::create_dir_all(out).map_err(at(out))?;
     let md = out.join("rotest.md");
     let text = format!(
         "# Rotation estimation: test accuracy at the best validation epoch\n\n\
@@ -503,13 +504,13 @@ pub fn write(runs_dir: &Path, out: &Path, bounds: &BTreeMap<String, f64>) -> Res
         markdown(&t),
         claims(&t, bounds)
     );
-    std::fs::write(&md, text).map_err(io(&md))?;
+    std::fs::write(&md, text).map_err(at(&md))?;
     let mut kept: Vec<RotestRecord> =
         runs.iter().map(|(_, r)| RotestRecord { history: Vec::new(), ..r.clone() }).collect();
     kept.sort_by_key(run_key);
     let json = serde_json::to_vec_pretty(&kept)
         .map_err(|e| RotestError::Format { path: archive.clone(), message: e.to_string() })?;
-    std::fs::write(&archive, json).map_err(io(&archive))?;
+    std::fs::write(&archive, json).map_err(at(&archive))?;
     let all = out.join("rotest_overview.png");
     overview(&all, &t, bounds)?;
     let mut files = vec![md, archive, all];

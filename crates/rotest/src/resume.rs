@@ -23,8 +23,9 @@ use equiarm_nn::burn::tensor::Device;
 use equiarm_sac::optim::{Adam, AdamParams};
 use rand_chacha::ChaCha8Rng;
 
-use crate::error::{Result, RotestError, io};
+use crate::error::{Result, RotestError};
 use crate::train::{EpochRecord, RotestConfig};
+use equiarm_types::files::at;
 
 /// The checkpoint directory below a run directory.
 pub const RESUME_DIR: &str = "resume";
@@ -60,7 +61,7 @@ pub fn find(run_dir: &Path) -> Option<PathBuf> {
 /// Reads the state of the checkpoint `dir` (from [`find`]).
 pub fn read_state(dir: &Path) -> Result<ResumeState> {
     let path = dir.join(STATE);
-    let bytes = std::fs::read(&path).map_err(io(&path))?;
+    let bytes = std::fs::read(&path).map_err(at(&path))?;
     serde_json::from_slice(&bytes)
         .map_err(|e| RotestError::Format { path, message: format!("not a rotest checkpoint state: {e}") })
 }
@@ -112,21 +113,21 @@ pub fn write(
 ) -> Result<()> {
     let tmp = run_dir.join(TMP_DIR);
     if tmp.exists() {
-        std::fs::remove_dir_all(&tmp).map_err(io(&tmp))?;
+        std::fs::remove_dir_all(&tmp).map_err(at(&tmp))?;
     }
-    std::fs::create_dir_all(&tmp).map_err(io(&tmp))?;
+    std::fs::create_dir_all(&tmp).map_err(at(&tmp))?;
     let files = Files::at(&tmp);
     save_nets(&files)?;
     optim.save(&tmp.join(ADAM))?;
     let path = tmp.join(STATE);
     let json = serde_json::to_vec_pretty(state)
         .map_err(|e| RotestError::Format { path: path.clone(), message: e.to_string() })?;
-    std::fs::write(&path, json).map_err(io(&path))?;
+    std::fs::write(&path, json).map_err(at(&path))?;
     let dir = run_dir.join(RESUME_DIR);
     if dir.exists() {
-        std::fs::remove_dir_all(&dir).map_err(io(&dir))?;
+        std::fs::remove_dir_all(&dir).map_err(at(&dir))?;
     }
-    std::fs::rename(&tmp, &dir).map_err(io(&dir))
+    Ok(std::fs::rename(&tmp, &dir).map_err(at(&dir))?)
 }
 
 /// Removes the checkpoint of a finished run.
@@ -134,7 +135,7 @@ pub fn remove(run_dir: &Path) -> Result<()> {
     for d in [RESUME_DIR, TMP_DIR] {
         let dir = run_dir.join(d);
         if dir.exists() {
-            std::fs::remove_dir_all(&dir).map_err(io(&dir))?;
+            std::fs::remove_dir_all(&dir).map_err(at(&dir))?;
         }
     }
     Ok(())

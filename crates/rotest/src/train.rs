@@ -21,8 +21,9 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 use crate::dataset::Dataset;
-use crate::error::{Result, RotestError, io};
+use crate::error::{Result, RotestError};
 use crate::resume;
+use equiarm_types::files::at;
 
 /// Input channels: RGBD of the first image, then of the second.
 pub const CHANNELS: usize = 8;
@@ -481,7 +482,7 @@ pub fn run_agreement(
     disc: bool,
 ) -> Result<(RotestRecord, Vec<(f64, f64)>)> {
     let path = run_dir.join("run.json");
-    let text = std::fs::read(&path).map_err(io(&path))?;
+    let text = std::fs::read(&path).map_err(at(&path))?;
     let rec: RotestRecord = serde_json::from_slice(&text)
         .map_err(|e| RotestError::Format { path: path.clone(), message: format!("not a run file: {e}") })?;
     let cfg = &rec.config;
@@ -806,11 +807,8 @@ pub fn run_with(
     let _claim = match equiarm_train::rundir::RunDirLock::try_acquire(out) {
         Ok(Some(claim)) => claim,
         Ok(None) => return Err(RotestError::Busy { path: out.to_path_buf() }),
-        // creating the directory or its lock file failed (try_acquire reports nothing else)
-        Err(equiarm_train::TrainError::Io { path, message }) => {
-            return Err(RotestError::Io { path, error: std::io::Error::other(message) });
-        }
-        Err(e) => return Err(RotestError::Io { path: out.to_path_buf(), error: std::io::Error::other(e.to_string()) }),
+        // creating the directory or its lock file failed
+        Err(e) => return Err(e.into()),
     };
     let init = Init::new(cfg.seed);
     let ncfg = net_config(cfg);
@@ -845,7 +843,7 @@ pub fn run_with(
     let path = out.join("run.json");
     let json = serde_json::to_vec_pretty(&record)
         .map_err(|e| RotestError::Format { path: path.clone(), message: e.to_string() })?;
-    std::fs::write(&path, json).map_err(io(&path))?;
+    std::fs::write(&path, json).map_err(at(&path))?;
     resume::remove(out)?;
     Ok(Outcome::Finished(record))
 }

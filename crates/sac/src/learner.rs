@@ -25,6 +25,7 @@ use crate::frame::StoredFrame;
 use crate::replay::{Replay, Stored};
 use crate::schedule::{CosineSchedule, LinearSchedule};
 use equiarm_types::NormalizedAction;
+use equiarm_types::files::{FileError, at, replace};
 
 /// Version of the checkpoint layout written by this crate.
 pub const CHECKPOINT_FORMAT: u32 = 1;
@@ -413,14 +414,9 @@ pub fn read_manifest(dir: &Path) -> Result<Manifest, LearnerError> {
 /// A JSON file of a run or checkpoint that could not be written or read, naming the file.
 #[derive(Debug, Error)]
 pub enum JsonFileError {
-    /// Reading, writing or renaming the file failed.
-    #[error("{}: {cause}", path.display())]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The cause.
-        cause: std::io::Error,
-    },
+    /// Reading, writing or renaming the file failed (the file, and the cause).
+    #[error(transparent)]
+    Io(#[from] FileError),
     /// The file's text is not the JSON expected (or the value cannot be serialised).
     #[error("{}: {cause}", path.display())]
     Json {
@@ -431,17 +427,15 @@ pub enum JsonFileError {
     },
 }
 
-/// Serialise `v` to `path` as pretty JSON through a temporary file.
+/// Serialise `v` to `path` as pretty JSON, whole or not at all ([`equiarm_types::files::replace`]).
 pub fn write_json<T: Serialize>(path: &Path, v: &T) -> Result<(), JsonFileError> {
     let text = serde_json::to_string_pretty(v).map_err(|cause| JsonFileError::Json { path: path.into(), cause })?;
-    let tmp = path.with_extension("json.tmp");
-    std::fs::write(&tmp, text).map_err(|cause| JsonFileError::Io { path: tmp.clone(), cause })?;
-    std::fs::rename(&tmp, path).map_err(|cause| JsonFileError::Io { path: path.into(), cause })
+    Ok(replace(path, text)?)
 }
 
 /// Read JSON from `path`, errors naming the file.
 pub fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, JsonFileError> {
-    let text = std::fs::read_to_string(path).map_err(|cause| JsonFileError::Io { path: path.into(), cause })?;
+    let text = std::fs::read_to_string(path).map_err(at(path))?;
     serde_json::from_str(&text).map_err(|cause| JsonFileError::Json { path: path.into(), cause })
 }
 

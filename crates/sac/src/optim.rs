@@ -13,19 +13,15 @@ use std::path::{Path, PathBuf};
 use equiarm_nn::burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
 use equiarm_nn::burn::optim::GradientsParams;
 use equiarm_nn::burn::tensor::{Device, Tensor, TensorData};
+use equiarm_types::files::{FileError, at};
 use thiserror::Error;
 
 /// Errors saving or loading optimiser state.
 #[derive(Debug, Error)]
 pub enum OptimError {
-    /// Reading or writing the file failed.
-    #[error("{path}: {cause}")]
-    Io {
-        /// File.
-        path: PathBuf,
-        /// Cause.
-        cause: std::io::Error,
-    },
+    /// Reading or writing the file failed (the file, and the cause).
+    #[error(transparent)]
+    File(#[from] FileError),
     /// The file is not a valid state file for this network.
     #[error("{path}: {message}")]
     Format {
@@ -121,7 +117,7 @@ impl Adam {
             tensors.push((format!("{name}.v"), shape.clone(), to_vec(v.clone())));
         }
         let meta = [("step".to_string(), self.step.to_string()), ("lr".to_string(), self.params.lr.to_string())];
-        crate::tensorfile::write(path, &tensors, &meta).map_err(|cause| OptimError::Io { path: path.into(), cause })
+        Ok(crate::tensorfile::write(path, &tensors, &meta)?)
     }
 
     /// Load state saved by [`Adam::save`] for `module` (every moment must name one of its
@@ -130,7 +126,7 @@ impl Adam {
     pub fn load<M: Module>(params: AdamParams, module: &M, path: &Path, device: &Device) -> Result<Self, OptimError> {
         let fmt = |message: String| OptimError::Format { path: path.into(), message };
         let file = crate::tensorfile::read(path).map_err(|e| match e {
-            crate::tensorfile::ReadError::Io(source) => OptimError::Io { path: path.into(), cause: source },
+            crate::tensorfile::ReadError::Io(source) => OptimError::File(at(path)(source)),
             crate::tensorfile::ReadError::Format(m) => fmt(m),
         })?;
         let step: u64 = file

@@ -17,7 +17,7 @@
 
 use std::collections::HashMap;
 use std::fs::File;
-use std::io::{self, BufReader, BufWriter, Read, Write};
+use std::io::{self, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -27,6 +27,7 @@ use serde::{Deserialize, Serialize};
 use crate::frame::StoredFrame;
 use crate::schedule::LinearSchedule;
 use equiarm_types::NormalizedAction;
+use equiarm_types::files::{FileError, write_atomically};
 
 /// The largest capacity accepted (2²⁴ slots); keeps a corrupted config from asking for a huge tree.
 pub const MAX_CAPACITY: usize = 1 << 24;
@@ -34,6 +35,9 @@ pub const MAX_CAPACITY: usize = 1 << 24;
 /// Errors from the replay buffer and its checkpoint files.
 #[derive(Debug, thiserror::Error)]
 pub enum ReplayError {
+    /// Writing a checkpoint failed (the file, and the cause).
+    #[error(transparent)]
+    File(#[from] FileError),
     /// A configuration field has an invalid value.
     #[error("replay config: `{field}` = {value} is invalid: {reason}")]
     Config {
@@ -476,37 +480,14 @@ impl Replay {
     /// its size in bytes. Each distinct frame is written once; the body is zstd-compressed with a
     /// checksum. See the format notes on [`Replay::load`].
     pub fn save(&self, path: &Path) -> Result<u64, ReplayError> {
-        let mut tmp = path.as_os_str().to_owned();
-        tmp.push(".tmp");
-        let tmp = PathBuf::from(tmp);
-        let io_err = |op, source| ReplayError::Io { path: tmp.clone(), op, cause: source };
-        let file = File::create(&tmp).map_err(|e| io_err("creating", e))?;
-        let result = self.write_to(file);
-        let file = match result {
-            Ok(f) => f,
-            Err(e) => {
-                let _ = std::fs::remove_file(&tmp);
-                return Err(io_err("writing", e));
-            }
-        };
-        if let Err(e) = file.sync_all() {
-            let _ = std::fs::remove_file(&tmp);
-            return Err(io_err("syncing", e));
-        }
-        drop(file);
-        std::fs::rename(&tmp, path).map_err(|source| ReplayError::Io {
-            path: path.to_owned(),
-            op: "renaming to",
-            cause: source,
-        })?;
+        write_atomically(path, |w| self.write_to(w))?;
         let bytes = std::fs::metadata(path)
             .map_err(|cause| ReplayError::Io { path: path.to_owned(), op: "reading metadata of", cause })?
             .len();
         Ok(bytes)
     }
 
-    fn write_to(&self, file: File) -> io::Result<File> {
-        let mut w = BufWriter::with_capacity(1 << 20, file);
+    fn write_to(&self, w: &mut impl Write) -> io::Result<()> {
         w.write_all(MAGIC)?;
         w.write_all(&VERSION.to_le_bytes())?;
         let mut z = zstd::Encoder::new(w, ZSTD_LEVEL)?;
@@ -556,8 +537,8 @@ impl Replay {
             z.write_all(&p.to_le_bytes())?;
         }
         z.write_all(TRAILER)?;
-        let w = z.finish()?;
-        w.into_inner().map_err(|e| e.into_error())
+        z.finish()?;
+        Ok(())
     }
 
     /// Loads a checkpoint written by [`Replay::save`]; frame sharing is restored, and the

@@ -6,8 +6,9 @@
 //! Limitations: F32 only; the whole file is read into memory.
 
 use std::collections::{BTreeMap, HashMap};
-use std::io::Write as _;
 use std::path::Path;
+
+use equiarm_types::files::{FileError, at, replace};
 
 use safetensors::tensor::TensorView;
 use safetensors::{Dtype, SafeTensors};
@@ -37,9 +38,10 @@ pub fn write(
     path: &Path,
     tensors: &[(String, Vec<usize>, Vec<f32>)],
     meta: &[(String, String)],
-) -> std::io::Result<()> {
-    let invalid =
-        |e: safetensors::SafeTensorError| std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string());
+) -> Result<(), FileError> {
+    let invalid = |e: safetensors::SafeTensorError| {
+        at(path)(std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string()))
+    };
     let bytes: Vec<Vec<u8>> =
         tensors.iter().map(|(_, _, data)| data.iter().flat_map(|x| x.to_le_bytes()).collect()).collect();
     let views = tensors
@@ -48,14 +50,9 @@ pub fn write(
         .map(|((name, shape, _), b)| Ok((name.as_str(), TensorView::new(Dtype::F32, shape.clone(), b)?)))
         .collect::<Result<Vec<_>, safetensors::SafeTensorError>>()
         .map_err(invalid)?;
-    let file = with_metadata(safetensors::serialize(views, None::<HashMap<String, String>>).map_err(invalid)?, meta)?;
-    let tmp = path.with_extension("tmp");
-    {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(&file)?;
-        f.sync_all()?;
-    }
-    std::fs::rename(&tmp, path)
+    let file = with_metadata(safetensors::serialize(views, None::<HashMap<String, String>>).map_err(invalid)?, meta)
+        .map_err(at(path))?;
+    replace(path, file)
 }
 
 /// `file` (a safetensors file without metadata) with `meta` as its `__metadata__`, keys sorted.
@@ -202,6 +199,6 @@ mod tests {
         assert!(matches!(read(&dir.join("missing.safetensors")), Err(ReadError::Io(_))));
         // A shape that does not match the data is refused when writing.
         let e = write(&dir.join("w.safetensors"), &[("w".into(), vec![3], vec![1.0; 4])], &[]).unwrap_err();
-        assert_eq!(e.kind(), std::io::ErrorKind::InvalidInput);
+        assert_eq!(e.cause.kind(), std::io::ErrorKind::InvalidInput);
     }
 }

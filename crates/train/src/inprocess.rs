@@ -63,7 +63,7 @@ impl LoopState {
     /// The state saved in checkpoint directory `checkpoint`; an error names the file and what is wrong.
     pub fn read(checkpoint: &Path) -> Result<Self, TrainError> {
         let path = checkpoint.join(STATE_FILE);
-        read_json(&path).map_err(|e| TrainError::io(&path, e))
+        Ok(read_json(&path)?)
     }
 }
 
@@ -123,7 +123,7 @@ pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Resu
         learner.resume(dir)?;
         let st = LoopState::read(dir)?;
         if st.envs.len() != n {
-            return Err(TrainError::io(dir, format!("{STATE_FILE} has {} envs, the config {n}", st.envs.len())));
+            return Err(TrainError::run_dir(dir, format!("{STATE_FILE} has {} envs, the config {n}", st.envs.len())));
         }
         record = RunRecord::open(&cfg, &opts.run_dir, Some((dir, st.global_step, st.evals)), opts.force)?;
         for (i, (episode, actions)) in st.envs.into_iter().enumerate() {

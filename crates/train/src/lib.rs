@@ -73,14 +73,27 @@ pub enum TrainError {
         /// Height in pixels.
         height: usize,
     },
-    /// Run-directory I/O.
+    /// A run or checkpoint directory cannot be used as asked (in use, holds another run, not a
+    /// checkpoint, written by another build).
     #[error("{path}: {message}")]
-    Io {
-        /// File or directory.
+    RunDir {
+        /// The directory or file.
         path: PathBuf,
-        /// What failed.
+        /// What is wrong, and the way out.
         message: String,
     },
+    /// Reading or writing a file failed (the file, and the cause).
+    #[error(transparent)]
+    File(#[from] equiarm_types::files::FileError),
+    /// A JSON file of the run could not be read or written.
+    #[error(transparent)]
+    Json(#[from] equiarm_sac::learner::JsonFileError),
+    /// The metrics log could not be written or read.
+    #[error(transparent)]
+    Metrics(#[from] metrics::MetricsError),
+    /// The learning curve could not be drawn.
+    #[error(transparent)]
+    Plot(#[from] plot::PlotError),
     /// The expert did not produce enough successful demos.
     #[error("the expert succeeded in {got} of {tried} demo episodes; {want} needed")]
     Demos {
@@ -108,8 +121,8 @@ impl From<equiarm_sac::frame::FrameError> for TrainError {
 }
 
 impl TrainError {
-    /// An I/O error about `path`.
-    pub fn io(path: &Path, e: impl Display) -> Self {
-        TrainError::Io { path: path.to_path_buf(), message: e.to_string() }
+    /// A [`TrainError::RunDir`] about `path`.
+    pub fn run_dir(path: &Path, message: impl Display) -> Self {
+        TrainError::RunDir { path: path.to_path_buf(), message: message.to_string() }
     }
 }

@@ -25,6 +25,8 @@ use std::fs::{File, OpenOptions};
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
+use equiarm_types::files::{FileError, at};
+
 /// File name of the JSON-lines log inside a run directory.
 pub const JSONL_FILE: &str = "metrics.jsonl";
 /// File name of the long-format CSV log inside a run directory.
@@ -35,14 +37,9 @@ pub const CSV_HEADER: &str = "global_step,wall_time,name,value";
 /// What can go wrong while writing or reading metrics.
 #[derive(Debug, thiserror::Error)]
 pub enum MetricsError {
-    /// Reading, writing, creating or renaming a file or directory failed.
-    #[error("{path}: {cause}")]
-    Io {
-        /// The file or directory involved.
-        path: PathBuf,
-        /// The underlying error.
-        cause: io::Error,
-    },
+    /// Reading, writing, creating or renaming a file or directory failed (the file, and the cause).
+    #[error(transparent)]
+    Io(#[from] FileError),
     /// A line of a metrics file could not be parsed.
     #[error("{path}:{line}: {reason}")]
     Malformed {
@@ -69,10 +66,6 @@ pub enum MetricsError {
     },
 }
 
-fn io_err(path: &Path) -> impl FnOnce(io::Error) -> MetricsError + '_ {
-    move |cause| MetricsError::Io { path: path.to_path_buf(), cause }
-}
-
 /// Appends scalar records to `metrics.jsonl` and `metrics.csv` in a run directory.
 #[derive(Debug)]
 pub struct MetricsWriter {
@@ -86,12 +79,12 @@ impl MetricsWriter {
     /// Starts fresh logs in `dir` (created if missing, with its parents), truncating any existing
     /// `metrics.jsonl` / `metrics.csv` there.
     pub fn create(dir: &Path) -> Result<Self, MetricsError> {
-        std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+        std::fs::create_dir_all(dir).map_err(at(dir))?;
         let jsonl_path = dir.join(JSONL_FILE);
         let csv_path = dir.join(CSV_FILE);
-        let jsonl = File::create(&jsonl_path).map_err(io_err(&jsonl_path))?;
-        let mut csv = File::create(&csv_path).map_err(io_err(&csv_path))?;
-        csv.write_all(format!("{CSV_HEADER}\n").as_bytes()).and_then(|_| csv.flush()).map_err(io_err(&csv_path))?;
+        let jsonl = File::create(&jsonl_path).map_err(at(&jsonl_path))?;
+        let mut csv = File::create(&csv_path).map_err(at(&csv_path))?;
+        csv.write_all(format!("{CSV_HEADER}\n").as_bytes()).and_then(|_| csv.flush()).map_err(at(&csv_path))?;
         Ok(Self { dir: dir.to_path_buf(), jsonl, csv, last: None })
     }
 
@@ -101,7 +94,7 @@ impl MetricsWriter {
     /// them. Missing files are started fresh. A torn final line (no newline) is dropped; any other
     /// malformed line is an error naming the file and line.
     pub fn resume(dir: &Path, up_to_step: u64) -> Result<Self, MetricsError> {
-        std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+        std::fs::create_dir_all(dir).map_err(at(dir))?;
         let jsonl_path = dir.join(JSONL_FILE);
         let csv_path = dir.join(CSV_FILE);
 
@@ -150,9 +143,9 @@ impl MetricsWriter {
                 }
             }
         }
-        replace_atomically(&jsonl_path, &kept_json)?;
-        replace_atomically(&csv_path, &kept_csv)?;
-        let open = |p: &Path| OpenOptions::new().append(true).open(p).map_err(io_err(p));
+        equiarm_types::files::replace(&jsonl_path, &kept_json)?;
+        equiarm_types::files::replace(&csv_path, &kept_csv)?;
+        let open = |p: &Path| OpenOptions::new().append(true).open(p).map_err(at(p));
         Ok(Self { dir: dir.to_path_buf(), jsonl: open(&jsonl_path)?, csv: open(&csv_path)?, last })
     }
 
@@ -193,9 +186,9 @@ impl MetricsWriter {
         json.push_str("}\n");
         let jsonl_path = self.dir.join(JSONL_FILE);
         let csv_path = self.dir.join(CSV_FILE);
-        self.jsonl.write_all(json.as_bytes()).and_then(|_| self.jsonl.flush()).map_err(io_err(&jsonl_path))?;
+        self.jsonl.write_all(json.as_bytes()).and_then(|_| self.jsonl.flush()).map_err(at(&jsonl_path))?;
         if !csv.is_empty() {
-            self.csv.write_all(csv.as_bytes()).and_then(|_| self.csv.flush()).map_err(io_err(&csv_path))?;
+            self.csv.write_all(csv.as_bytes()).and_then(|_| self.csv.flush()).map_err(at(&csv_path))?;
         }
         self.last = Some((global_step, if wall_time.is_finite() { wall_time } else { f64::NAN }));
         Ok(())
@@ -224,7 +217,7 @@ fn read_optional(path: &Path) -> Result<Option<String>, MetricsError> {
     match std::fs::read_to_string(path) {
         Ok(t) => Ok(Some(t)),
         Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(None),
-        Err(e) => Err(MetricsError::Io { path: path.to_path_buf(), cause: e }),
+        Err(e) => Err(at(path)(e).into()),
     }
 }
 
@@ -261,23 +254,13 @@ fn parse_json_record(path: &Path, line_no: usize, line: &str) -> Result<JsonReco
     Ok(JsonRecord { keys: (step, wall), object })
 }
 
-fn replace_atomically(path: &Path, contents: &str) -> Result<(), MetricsError> {
-    let mut tmp_name = path.file_name().unwrap_or_default().to_os_string();
-    tmp_name.push(".tmp");
-    let tmp = path.with_file_name(tmp_name);
-    let mut f = File::create(&tmp).map_err(io_err(&tmp))?;
-    f.write_all(contents.as_bytes()).and_then(|_| f.sync_all()).map_err(io_err(&tmp))?;
-    drop(f);
-    std::fs::rename(&tmp, path).map_err(io_err(path))
-}
-
 /// The `(global_step, value)` pairs of scalar `name` in `dir/metrics.jsonl`, in file order; records
 /// without `name` are skipped and a `null` value reads as NaN. A torn final line (no newline, e.g.
 /// while the run is writing it) is ignored; any other malformed line is an error naming the file
 /// and the 1-based line number.
 pub fn read_series(dir: &Path, name: &str) -> Result<Vec<(u64, f64)>, MetricsError> {
     let path = dir.join(JSONL_FILE);
-    let text = std::fs::read_to_string(&path).map_err(io_err(&path))?;
+    let text = std::fs::read_to_string(&path).map_err(at(&path))?;
     let mut out = Vec::new();
     for (line_no, line) in complete_lines(&text) {
         if line.trim().is_empty() {

@@ -14,8 +14,6 @@
 //! points with a non-finite coordinate are skipped and break the polyline (and band) there, like
 //! matplotlib; bands expect the points of a series in increasing x order.
 
-use std::fs::File;
-use std::io::BufWriter;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -37,14 +35,9 @@ pub enum PlotError {
         /// Its parent directory, which is missing.
         dir: PathBuf,
     },
-    /// Creating or writing the output file failed.
-    #[error("cannot write {path}: {cause}")]
-    Io {
-        /// The output file.
-        path: PathBuf,
-        /// The underlying error.
-        cause: std::io::Error,
-    },
+    /// Creating or writing the output file failed (the file, and the cause).
+    #[error(transparent)]
+    Io(#[from] equiarm_types::files::FileError),
     /// PNG encoding failed.
     #[error("cannot encode {path} as PNG: {cause}")]
     Encode {
@@ -627,8 +620,8 @@ pub fn render(chart: &Chart, series: &[Series]) -> Result<RgbImage, PlotError> {
         .ok_or_else(|| PlotError::Draw("the drawing buffer does not match the chart size".into()))
 }
 
-/// Draws the chart and writes it as a PNG file at `path` (overwriting it). The file's directory must
-/// already exist.
+/// Draws the chart and writes it as a PNG file at `path`, replacing it whole or not at all
+/// ([`equiarm_types::files::replace`]). The file's directory must already exist.
 pub fn write_png(path: &Path, chart: &Chart, series: &[Series]) -> Result<(), PlotError> {
     if let Some(dir) = path.parent()
         && !dir.as_os_str().is_empty()
@@ -637,13 +630,9 @@ pub fn write_png(path: &Path, chart: &Chart, series: &[Series]) -> Result<(), Pl
         return Err(PlotError::MissingDirectory { path: path.to_path_buf(), dir: dir.to_path_buf() });
     }
     let img = render(chart, series)?;
-    let file = File::create(path).map_err(|cause| PlotError::Io { path: path.to_path_buf(), cause })?;
-    let mut out = BufWriter::new(file);
-    img.write_to(&mut out, ImageFormat::Png).map_err(|cause| PlotError::Encode { path: path.to_path_buf(), cause })?;
-    out.into_inner()
-        .map_err(|e| PlotError::Io { path: path.to_path_buf(), cause: e.into_error() })?
-        .sync_all()
-        .map_err(|cause| PlotError::Io { path: path.to_path_buf(), cause })
+    let mut png = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut png, ImageFormat::Png).map_err(|cause| PlotError::Encode { path: path.to_path_buf(), cause })?;
+    Ok(equiarm_types::files::replace(path, png.into_inner())?)
 }
 
 #[cfg(test)]

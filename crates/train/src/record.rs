@@ -77,7 +77,7 @@ impl RunRecord {
         force: bool,
     ) -> Result<Self, TrainError> {
         let claim = RunDirLock::acquire_for(run_dir, resume.as_ref().map(|r| r.0), force)?;
-        write_json(&run_dir.join("config.json"), cfg).map_err(|e| TrainError::io(run_dir, e))?;
+        write_json(&run_dir.join("config.json"), cfg)?;
         let (metrics, evals) = match resume {
             Some((_, step, evals)) => (MetricsWriter::resume(run_dir, step), evals),
             None => (MetricsWriter::create(run_dir), Vec::new()),
@@ -85,7 +85,7 @@ impl RunRecord {
         Ok(RunRecord {
             dir: run_dir.to_path_buf(),
             cfg: cfg.clone(),
-            metrics: metrics.map_err(|e| TrainError::io(run_dir, e))?,
+            metrics: metrics?,
             evals,
             last_checkpoint: None,
             _claim: claim,
@@ -108,7 +108,7 @@ impl RunRecord {
     }
 
     fn log(&mut self, step: u64, wall_s: f64, named: &[(&str, f64)]) -> Result<(), TrainError> {
-        self.metrics.log(step, wall_s, named).map_err(|e| TrainError::io(&self.dir, e))
+        Ok(self.metrics.log(step, wall_s, named)?)
     }
 
     /// A training episode ended at env step `step`: its return, discounted return, length and success.
@@ -159,7 +159,7 @@ impl RunRecord {
     ) -> Result<PathBuf, TrainError> {
         let dir = self.dir.join("checkpoints").join(step_dir_name(learner.updates()));
         learner.save(&dir)?;
-        write_json(&dir.join(state_file), state).map_err(|e| TrainError::io(&dir, e))?;
+        write_json(&dir.join(state_file), state)?;
         write_latest(&self.dir, learner.updates())?;
         log::info!("checkpoint {}", dir.display());
         self.last_checkpoint = Some(dir.clone());
@@ -172,7 +172,7 @@ impl RunRecord {
         if self.last_checkpoint.as_ref().is_none_or(|p| !p.ends_with(step_dir_name(learner.updates()))) {
             self.checkpoint(learner, state_file, state)?;
         }
-        write_json(&self.dir.join("evals.json"), &self.evals).map_err(|e| TrainError::io(&self.dir, e))?;
+        write_json(&self.dir.join("evals.json"), &self.evals)?;
         // The curve is redrawn at every evaluation; draw it at the end too (a run may end before one).
         self.write_curve()
     }
@@ -202,7 +202,6 @@ impl RunRecord {
             y_range: Some((0.0, 1.0)),
             ..Chart::default()
         };
-        let path = self.dir.join("learning_curve.png");
-        write_png(&path, &chart, &series).map_err(|e| TrainError::io(&path, e))
+        Ok(write_png(&self.dir.join("learning_curve.png"), &chart, &series)?)
     }
 }

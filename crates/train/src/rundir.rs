@@ -12,6 +12,8 @@
 
 use std::path::{Path, PathBuf};
 
+use equiarm_types::files::{at, replace};
+
 use crate::TrainError;
 
 /// Checkpoint directory name for `updates`.
@@ -22,10 +24,7 @@ pub fn step_dir_name(updates: u64) -> String {
 /// checkpoint is complete: the file is replaced atomically).
 pub fn write_latest(run_dir: &Path, updates: u64) -> Result<(), TrainError> {
     let root = run_dir.join("checkpoints");
-    let io = |e: std::io::Error| TrainError::Io { path: root.clone(), message: e.to_string() };
-    let tmp = root.join("latest.tmp");
-    std::fs::write(&tmp, format!("{}\n", step_dir_name(updates))).map_err(io)?;
-    std::fs::rename(&tmp, root.join("latest")).map_err(io)
+    Ok(replace(&root.join("latest"), format!("{}\n", step_dir_name(updates)))?)
 }
 
 /// The run directory a checkpoint directory belongs to (`RUN/checkpoints/step_N` → `RUN`), or
@@ -58,7 +57,7 @@ impl RunDirLock {
                 let owner = std::fs::read_to_string(run_dir.join(".lock")).unwrap_or_default();
                 let owner = owner.trim();
                 let who = if owner.is_empty() { String::new() } else { format!(" (pid {owner})") };
-                Err(TrainError::Io {
+                Err(TrainError::RunDir {
                     path: run_dir.into(),
                     message: format!(
                         "the run directory is in use by another training process{who}: wait for it to end or choose another --run-dir"
@@ -71,8 +70,7 @@ impl RunDirLock {
     /// [`RunDirLock::acquire`], but `None` when another process holds the claim (instead of an
     /// error), for a caller that moves on to other work.
     pub fn try_acquire(run_dir: &Path) -> Result<Option<Self>, TrainError> {
-        let io = |path: &Path, message: String| TrainError::Io { path: path.into(), message };
-        std::fs::create_dir_all(run_dir).map_err(|e| io(run_dir, e.to_string()))?;
+        std::fs::create_dir_all(run_dir).map_err(at(run_dir))?;
         let path = run_dir.join(".lock");
         let mut file = std::fs::OpenOptions::new()
             .read(true)
@@ -80,7 +78,7 @@ impl RunDirLock {
             .create(true)
             .truncate(false)
             .open(&path)
-            .map_err(|e| io(&path, e.to_string()))?;
+            .map_err(at(&path))?;
         match file.try_lock() {
             Ok(()) => {}
             Err(std::fs::TryLockError::WouldBlock) => return Ok(None),
@@ -91,10 +89,12 @@ impl RunDirLock {
                     path.display()
                 );
             }
-            Err(std::fs::TryLockError::Error(e)) => return Err(io(&path, format!("cannot lock: {e}"))),
+            Err(std::fs::TryLockError::Error(e)) => {
+                return Err(TrainError::run_dir(&path, format!("cannot lock: {e}")));
+            }
         }
         use std::io::Write;
-        file.set_len(0).and_then(|_| writeln!(file, "{}", std::process::id())).map_err(|e| io(&path, e.to_string()))?;
+        file.set_len(0).and_then(|_| writeln!(file, "{}", std::process::id())).map_err(at(&path))?;
         Ok(Some(RunDirLock { _file: file }))
     }
 
@@ -132,7 +132,7 @@ impl RunDirLock {
             return Ok(claim);
         }
         if !force {
-            return Err(TrainError::Io {
+            return Err(TrainError::RunDir {
                 path: run_dir.into(),
                 message: format!(
                     "holds a run already ({}): continue it with --resume {}, choose another --run-dir, or pass --force to move it aside",
@@ -146,7 +146,7 @@ impl RunDirLock {
             .find(|p| !p.exists())
             .expect("a free name");
         drop(claim);
-        std::fs::rename(run_dir, &aside).map_err(|e| TrainError::Io {
+        std::fs::rename(run_dir, &aside).map_err(|e| TrainError::RunDir {
             path: run_dir.into(),
             message: format!("cannot move the previous run aside to {}: {e}", aside.display()),
         })?;
@@ -175,11 +175,10 @@ pub fn find_checkpoint(path: &Path) -> Result<PathBuf, TrainError> {
         return Ok(path.to_path_buf());
     }
     if is_latest_pointer(path) {
-        let name = std::fs::read_to_string(path)
-            .map_err(|e| TrainError::Io { path: path.to_path_buf(), message: e.to_string() })?;
+        let name = std::fs::read_to_string(path).map_err(at(path))?;
         let dir = path.parent().unwrap_or(Path::new(".")).join(name.trim());
         if !dir.join("manifest.json").is_file() {
-            return Err(TrainError::Io {
+            return Err(TrainError::RunDir {
                 path: dir,
                 message: format!("named by {} but not a checkpoint directory", path.display()),
             });
@@ -187,7 +186,7 @@ pub fn find_checkpoint(path: &Path) -> Result<PathBuf, TrainError> {
         return Ok(dir);
     }
     let latest = path.join("checkpoints").join("latest");
-    let name = std::fs::read_to_string(&latest).map_err(|e| TrainError::Io {
+    let name = std::fs::read_to_string(&latest).map_err(|e| TrainError::RunDir {
         path: latest.clone(),
         message: format!("{e} (not a checkpoint directory nor a run directory with checkpoints)"),
     })?;

@@ -149,7 +149,7 @@ impl Trainer {
     /// Claim the run directory and build (or resume) the learner.
     pub fn open(cfg: TrainConfig, opts: TrainerOptions) -> Result<(Self, Learner), TrainError> {
         if opts.deterministic && opts.resume.is_some() {
-            return Err(TrainError::io(
+            return Err(TrainError::run_dir(
                 &opts.run_dir,
                 "--deterministic does not resume (--resume): the policies count rounds from the first weights version of a fresh run",
             ));
@@ -162,13 +162,13 @@ impl Trainer {
                 let ck = find_checkpoint(p)?;
                 learner.resume(&ck)?;
                 st = read_json(&ck.join(STATE_FILE)).map_err(|e| {
-                    TrainError::io(
+                    TrainError::run_dir(
                         &ck,
                         format!("{e} (not a checkpoint of the trainer node: resume it with the in-process loop)"),
                     )
                 })?;
                 if st.message_schema != equiarm_msgs::SCHEMA_VERSION {
-                    return Err(TrainError::io(
+                    return Err(TrainError::run_dir(
                         &ck,
                         format!(
                             "written by a trainer with message schema {}, this one speaks {}: resume it with the equiarm that wrote it",

@@ -32,17 +32,18 @@ fn no_message_repeats_its_source() {
     let sim = || equiarm_sim::SimError::Read { file: "gripper.urdf".into(), cause: io_error() };
     let path = PathBuf::from("some/file");
     let errors: Vec<Box<dyn Error>> = vec![
-        Box::new(BagError::Io { path: path.clone(), cause: io_error() }),
+        Box::new(equiarm_types::files::at(&path)(io_error())),
+        Box::new(BagError::from(equiarm_types::files::at(&path)(io_error()))),
         Box::new(equiarm_bag::DecodeError::Cdr {
             topic: "/env0/observation".into(),
             cause: equiarm_msgs::cdr::decode::<equiarm_msgs::msg::Observation>(&[0]).unwrap_err(),
         }),
         Box::new(sim()),
-        Box::new(equiarm_train::plot::PlotError::Io { path: path.clone(), cause: io_error() }),
+        Box::new(equiarm_train::plot::PlotError::from(equiarm_types::files::at(&path)(io_error()))),
         Box::new(equiarm_train::stepper::StepError::Sim { what: "stepping the env".into(), cause: sim() }),
-        Box::new(equiarm_train::metrics::MetricsError::Io { path: path.clone(), cause: io_error() }),
-        Box::new(equiarm_sac::optim::OptimError::Io { path: path.clone(), cause: io_error() }),
-        Box::new(equiarm_sac::learner::JsonFileError::Io { path: path.clone(), cause: io_error() }),
+        Box::new(equiarm_train::metrics::MetricsError::from(equiarm_types::files::at(&path)(io_error()))),
+        Box::new(equiarm_sac::optim::OptimError::from(equiarm_types::files::at(&path)(io_error()))),
+        Box::new(equiarm_sac::learner::JsonFileError::from(equiarm_types::files::at(&path)(io_error()))),
         Box::new(equiarm_sac::augment::AugmentError::Frame { index: 1, cause: frame() }),
         Box::new(equiarm_sac::replay::ReplayError::Io { path: path.clone(), op: "opening", cause: io_error() }),
         Box::new(equiarm_sac::agent::AgentError::Net {

@@ -9,10 +9,14 @@
 //! serde's string form, clap's `ValueEnum` and the lists of names in help and error texts all come
 //! from it, so text is parsed once, at the edge, and a config holds these types. No simulator,
 //! network or ROS dependency: this crate is at the bottom of the graph.
+//!
+//! Beside the words, what every crate does with files the same way ([`files`]): the error of a file
+//! operation, and writing a file whole or not at all.
 
 pub mod action;
 pub mod augmentation;
 pub mod corruption;
+pub mod files;
 pub mod model;
 mod named;
 pub mod planes;
