@@ -327,6 +327,7 @@ fn mean_band(label: String, vi: usize, stats: &[(f64, (f64, f64))]) -> Series {
         color: palette(vi),
         points: stats.iter().map(|(x, (m, _))| (*x, *m)).collect(),
         band: Some(stats.iter().map(|(_, (_, se))| *se).collect()),
+        bars: false,
     }
 }
 

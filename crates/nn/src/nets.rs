@@ -217,6 +217,21 @@ pub fn actor_out_type(group: Group) -> FieldType {
         .concat(&FieldType::trivial(group, 7))
 }
 
+/// The equivariant actors' head: a 1×1 convolution from the encoder's regular fields to the
+/// action's field types ([`actor_out_type`]).
+fn actor_head(g: Group, cfg: &NetConfig, init: &Init, device: &Device) -> Result<EquivariantConv, NetError> {
+    Ok(EquivariantConv::new(
+        "head",
+        &FieldType::regular(g, cfg.hidden),
+        &actor_out_type(g),
+        1,
+        0,
+        cfg.numerics,
+        init,
+        device,
+    )?)
+}
+
 /// The field type of the lifted action (6 channels): 2 × trivial (p, dz) ⊕ `irrep(1,1)` (dx, dy)
 /// ⊕ `quotient(C4)` (dθ, −dθ). docs/paper.md §1.5.
 pub fn action_type(group: Group) -> FieldType {
@@ -272,17 +287,7 @@ impl EquiActor {
     pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
         let g = Group::dihedral(4);
         let enc = EquiEncoder::new("enc", g, cfg, init, device)?;
-        let head = EquivariantConv::new(
-            "head",
-            &FieldType::regular(g, cfg.hidden),
-            &actor_out_type(g),
-            1,
-            0,
-            cfg.numerics,
-            init,
-            device,
-        )?;
-        Ok(EquiActor { enc, head })
+        Ok(EquiActor { enc, head: actor_head(g, cfg, init, device)? })
     }
 
     /// The head's 11 geometric output channels `[B, 11]` (type [`actor_out_type`]).
@@ -553,19 +558,7 @@ impl SenActor {
     /// Build with weights from `init` (paper: [`NetConfig::paper_sen`]).
     pub fn new(cfg: &NetConfig, init: &Init, device: &Device) -> Result<Self, NetError> {
         let g = Group::dihedral(4);
-        Ok(SenActor {
-            enc: SenEncoder::new("enc", cfg, init, device)?,
-            head: EquivariantConv::new(
-                "head",
-                &FieldType::regular(g, cfg.hidden),
-                &actor_out_type(g),
-                1,
-                0,
-                cfg.numerics,
-                init,
-                device,
-            )?,
-        })
+        Ok(SenActor { enc: SenEncoder::new("enc", cfg, init, device)?, head: actor_head(g, cfg, init, device)? })
     }
 }
 

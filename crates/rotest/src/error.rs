@@ -54,7 +54,10 @@ pub enum RotestError {
     /// Saving or loading the optimiser's state failed.
     #[error(transparent)]
     Optim(#[from] equiarm_sac::optim::OptimError),
-    /// Writing an image or a chart failed.
+    /// Drawing or writing a figure failed.
+    #[error(transparent)]
+    Plot(#[from] equiarm_train::plot::PlotError),
+    /// Writing an image (a snapshot of pairs) failed.
     #[error("{path}: {message}")]
     Image {
         /// The output file.

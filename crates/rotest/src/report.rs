@@ -7,8 +7,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use equiarm_train::plot::{ensure_font, mean_se};
-use plotters::prelude::*;
+use equiarm_train::plot::{Chart, Legend, Scale, Series, mean_se, write_panels_png, write_png};
 
 use equiarm_sim::rotest::PairCorruption;
 
@@ -69,7 +68,10 @@ pub fn read_record(path: &Path) -> Result<RotestRecord> {
 /// Test accuracies by setting → variant → training pairs.
 pub type Table = BTreeMap<String, BTreeMap<String, BTreeMap<usize, Vec<f64>>>>;
 
-/// Groups runs into a [`Table`].
+/// Groups runs into a [`Table`], each cell's accuracies in increasing order: a mean is then summed
+/// in one order whatever order the runs came in (from the runs directory, or from the archive on
+/// another machine), so a mean that falls on a rounding boundary (2.01 / 4 = 0.5025) is printed
+/// the same by both.
 pub fn table(runs: &[(PathBuf, RotestRecord)]) -> Table {
     let mut t = Table::new();
     for (_, r) in runs {
@@ -80,6 +82,9 @@ pub fn table(runs: &[(PathBuf, RotestRecord)]) -> Table {
             .entry(r.config.train_pairs)
             .or_default()
             .push(r.test_acc);
+    }
+    for cells in t.values_mut().flat_map(|by_var| by_var.values_mut()).flat_map(|by_n| by_n.values_mut()) {
+        cells.sort_by(f64::total_cmp);
     }
     t
 }
@@ -289,129 +294,48 @@ pub fn claims(t: &Table, bounds: &BTreeMap<String, f64>) -> String {
 
 /// A variant's colour, the same in every figure: CNN red, CNN + trans blue, Equi green; others
 /// (`(no crop)`, `Equi + trans`) purple, orange or grey by their name.
-fn color(variant: &str) -> RGBColor {
-    const OTHERS: [RGBColor; 3] = [RGBColor(140, 80, 160), RGBColor(230, 140, 20), RGBColor(110, 110, 110)];
+fn color(variant: &str) -> [u8; 3] {
+    const OTHERS: [[u8; 3]; 3] = [[140, 80, 160], [230, 140, 20], [110, 110, 110]];
     match variant {
-        CNN => RGBColor(200, 60, 40),
-        CNN_TRANS => RGBColor(40, 90, 200),
-        EQUI => RGBColor(40, 150, 70),
+        CNN => [200, 60, 40],
+        CNN_TRANS => [40, 90, 200],
+        EQUI => [40, 150, 70],
         _ => OTHERS[variant.bytes().map(usize::from).sum::<usize>() % OTHERS.len()],
     }
 }
 
-/// How a panel is drawn: a figure of its own, or one of many in the overview.
-#[derive(Clone, Copy)]
-struct PanelStyle {
-    caption: u32,
-    labels: u32,
-    axis_names: bool,
-    legend: bool,
-}
-
-/// One setting's chart on `area`: accuracy (%) against training pairs (log scale) for each variant,
-/// error bars of one s.e.; `bound` (if below 1) as a dashed line.
-fn panel<DB: DrawingBackend>(
-    area: &DrawingArea<DB, plotters::coord::Shift>,
+/// One setting's chart: accuracy (%) against training pairs (log scale, a tick at each N run) for
+/// each variant, error bars of one s.e.; `bound` (if below 1) as a dashed line.
+fn panel(
     caption: &str,
     by_var: &BTreeMap<String, BTreeMap<usize, Vec<f64>>>,
     bound: Option<f64>,
-    style: PanelStyle,
-) -> std::result::Result<(), String> {
-    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
-    // The sizes that were run, sorted and once each: the axis's ticks (the log scale's own ticks
-    // crowd into each other once N spans more than a decade).
-    let ns: Vec<usize> = by_var
-        .values()
-        .flat_map(|m| m.keys().copied())
-        .collect::<std::collections::BTreeSet<_>>()
-        .into_iter()
+) -> (Chart, Vec<Series>) {
+    let ns: std::collections::BTreeSet<usize> = by_var.values().flat_map(|m| m.keys().copied()).collect();
+    let lo = ns.first().copied().unwrap_or(1).max(1) as f64;
+    let hi = ns.last().copied().unwrap_or(1).max(1) as f64;
+    let chart = Chart {
+        x_scale: Scale::Log,
+        // a margin of 20 % on both sides (N = 100, 400, 1600 evenly spaced)
+        x_range: Some((lo / 1.25, hi * 1.25)),
+        x_ticks: Some(ns.iter().map(|&n| n as f64).collect()),
+        y_range: Some((0.0, 100.0)),
+        reference: bound.filter(|b| *b < 1.0).map(|b| (format!("invariant bound {:.1} %", 100.0 * b), 100.0 * b)),
+        legend: Legend::LowerRight,
+        ..Chart::new(caption, "training pairs N (log scale)", "test accuracy (%)")
+    };
+    let series = by_var
+        .iter()
+        .map(|(v, by_n)| {
+            let stats: Vec<(f64, (f64, f64))> = by_n.iter().map(|(n, a)| (*n as f64, mean_se(a))).collect();
+            Series {
+                band: Some(stats.iter().map(|(_, (_, se))| 100.0 * se).collect()),
+                bars: true,
+                ..Series::new(v.clone(), color(v), stats.iter().map(|(n, (m, _))| (*n, 100.0 * m)).collect())
+            }
+        })
         .collect();
-    let (lo, hi) = (ns.first().copied().unwrap_or(1) as f64, ns.last().copied().unwrap_or(1) as f64);
-    // Logarithmic N axis with a margin of 20 % on both sides (N = 100, 400, 1600 evenly spaced).
-    let (x0, x1) = (lo.max(1.0) / 1.25, hi.max(1.0) * 1.25);
-    let mut chart = ChartBuilder::on(area)
-        .caption(caption, ("sans-serif", style.caption))
-        .margin(if style.axis_names { 12 } else { 6 })
-        .x_label_area_size(if style.axis_names { 40 } else { 22 })
-        .y_label_area_size(if style.axis_names { 50 } else { 32 })
-        .build_cartesian_2d((x0..x1).log_scale().with_key_points(ns.iter().map(|&n| n as f64).collect()), 0f64..100f64)
-        .map_err(e)?;
-    let mut mesh = chart.configure_mesh();
-    mesh.light_line_style(WHITE)
-        .label_style(("sans-serif", style.labels))
-        .x_label_formatter(&|x| format!("{x:.0}"))
-        .y_label_formatter(&|y| format!("{y:.0}"));
-    if style.axis_names {
-        mesh.x_desc("training pairs N (log scale)").y_desc("test accuracy (%)");
-    }
-    mesh.draw().map_err(e)?;
-    for (v, by_n) in by_var {
-        let c = color(v);
-        let pts: Vec<(f64, f64, f64)> = by_n
-            .iter()
-            .map(|(n, a)| {
-                let (m, se) = mean_se(a);
-                (*n as f64, 100.0 * m, 100.0 * se)
-            })
-            .collect();
-        chart
-            .draw_series(std::iter::once(PathElement::new(
-                pts.iter().map(|p| (p.0, p.1)).collect::<Vec<_>>(),
-                c.stroke_width(2),
-            )))
-            .map_err(e)?
-            .label(v.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-        // error bars of one s.e. and a dot at each mean
-        chart
-            .draw_series(pts.iter().map(|p| PathElement::new(vec![(p.0, p.1 - p.2), (p.0, p.1 + p.2)], c)))
-            .map_err(e)?;
-        chart.draw_series(pts.iter().map(|p| Circle::new((p.0, p.1), 3, c.filled()))).map_err(e)?;
-    }
-    if let Some(b) = bound.filter(|b| *b < 1.0) {
-        let y = 100.0 * b;
-        // dashed: 40 dashes, evenly spaced on the log axis
-        let at = |t: f64| x0 * (x1 / x0).powf(t / 80.0);
-        chart
-            .draw_series(
-                (0..40).map(|k| PathElement::new(vec![(at(2.0 * k as f64), y), (at(2.0 * k as f64 + 1.0), y)], BLACK)),
-            )
-            .map_err(e)?;
-        chart
-            .draw_series(std::iter::once(PathElement::new(vec![(x0, y), (x0, y)], BLACK)))
-            .map_err(e)?
-            .label(format!("invariant bound {y:.1} %"))
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
-    }
-    if style.legend {
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", style.labels))
-            .draw()
-            .map_err(e)?;
-    }
-    Ok(())
-}
-
-/// Draws a `w × h` RGB image with `draw` and saves it as PNG at `path`.
-fn png(
-    path: &Path,
-    (w, h): (u32, u32),
-    draw: impl FnOnce(&DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>) -> std::result::Result<(), String>,
-) -> Result<()> {
-    let err = |m: String| RotestError::Image { path: path.to_path_buf(), message: m };
-    ensure_font().map_err(|e| err(e.to_string()))?;
-    let mut buf = vec![255u8; (w * h * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        draw(&root).map_err(err)?;
-        root.present().map_err(|e| err(e.to_string()))?;
-    }
-    let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| err("buffer size".into()))?;
-    img.save(path).map_err(|e| err(e.to_string()))
+    (chart, series)
 }
 
 /// One PNG: accuracy (%) against training pairs (log scale) for each variant of `setting`, error bars of one
@@ -422,31 +346,34 @@ pub fn figure(
     by_var: &BTreeMap<String, BTreeMap<usize, Vec<f64>>>,
     bound: Option<f64>,
 ) -> Result<()> {
-    let style = PanelStyle { caption: 20, labels: 14, axis_names: true, legend: true };
-    png(path, (640, 420), |root| panel(root, &format!("rotation estimation: {setting}"), by_var, bound, style))
+    let (chart, series) = panel(&format!("rotation estimation: {setting}"), by_var, bound);
+    Ok(write_png(path, &Chart { width: 640, height: 420, ..chart }, &series)?)
 }
 
 /// One PNG with a small panel per setting of `t` (five to a row, in the table's order), the legend
 /// in the first: the whole experiment at a glance. Axes as in [`figure`]: training pairs N (log
 /// scale) across, test accuracy (%) up.
 pub fn overview(path: &Path, t: &Table, bounds: &BTreeMap<String, f64>) -> Result<()> {
-    let cols = 5usize;
-    let rows = t.len().div_ceil(cols).max(1);
-    let (pw, ph) = (330u32, 250u32);
-    png(path, (pw * cols as u32, 40 + ph * rows as u32), |root| {
-        let (top, rest) = root.split_vertically(40);
-        top.titled(
-            "rotation estimation: test accuracy (%) against training pairs N (log scale), mean ± s.e. over seeds",
-            ("sans-serif", 18),
-        )
-        .map_err(|e| e.to_string())?;
-        let areas = rest.split_evenly((rows, cols));
-        for (k, ((setting, by_var), area)) in t.iter().zip(&areas).enumerate() {
-            let style = PanelStyle { caption: 15, labels: 11, axis_names: false, legend: k == 0 };
-            panel(area, setting, by_var, bounds.get(setting).copied(), style)?;
-        }
-        Ok(())
-    })
+    let panels: Vec<(Chart, Vec<Series>)> = t
+        .iter()
+        .enumerate()
+        .map(|(k, (setting, by_var))| {
+            let (chart, series) = panel(setting, by_var, bounds.get(setting).copied());
+            let legend = if k == 0 { Legend::LowerRight } else { Legend::Hidden };
+            let small = Chart {
+                width: 330,
+                height: 250,
+                x_label: String::new(),
+                y_label: String::new(),
+                text_scale: 0.75,
+                legend,
+                ..chart
+            };
+            (small, series)
+        })
+        .collect();
+    let title = "rotation estimation: test accuracy (%) against training pairs N (log scale), mean ± s.e. over seeds";
+    Ok(write_panels_png(path, title, &panels, 5)?)
 }
 
 /// The archive a report writes beside its table: every run's record without its epoch history

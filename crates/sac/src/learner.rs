@@ -64,8 +64,8 @@ pub struct Manifest {
     pub equiarm_version: String,
     /// Tensor library.
     pub burn_version: String,
-    /// Network family name (`equi`, `cnn`, `sen`).
-    pub model: String,
+    /// Network family (written as its name: `equi`, `cnn`, …).
+    pub model: ModelKind,
     /// The run's full config.
     pub config: TrainConfig,
     /// Gradient updates made.
@@ -344,7 +344,7 @@ impl Learner {
             format: CHECKPOINT_FORMAT,
             equiarm_version: env!("CARGO_PKG_VERSION").into(),
             burn_version: "0.22.1".into(),
-            model: self.cfg.agent.model.name().into(),
+            model: self.cfg.agent.model,
             config: self.cfg.clone(),
             updates: self.agent.updates(),
             transitions: self.transitions,

@@ -102,6 +102,7 @@ fn main() {
             color: palette(gi),
             points: stats.iter().map(|s| (s.0, s.1)).collect(),
             band: Some(stats.iter().map(|s| s.2).collect()),
+            bars: false,
         });
     }
     let chart = Chart {

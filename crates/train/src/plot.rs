@@ -1,18 +1,21 @@
-//! Learning-curve PNGs drawn with [`plotters`]: a white canvas, axes with "nice" ticks (1, 2 or
-//! 5 × 10^k, [`nice_ticks`]), a light grid, one polyline with point markers per [`Series`], optional
-//! translucent bands (e.g. mean ± standard error over seeds), a legend to the right of the plot, a
-//! title and axis labels.
+//! Charts drawn with [`plotters`], the one chart module of every figure equiarm writes (learning
+//! curves, the experiment reports, the rotation experiment's accuracy against training pairs): a
+//! white canvas, axes with "nice" ticks (1, 2 or 5 × 10^k, [`nice_ticks`]) or ticks the chart
+//! names, a light grid, one polyline with point markers per [`Series`], an optional ± band per
+//! series drawn as a translucent fill or as error bars, an optional dashed reference line, a legend
+//! (right of the plot, inside it, or none), a title and axis labels; a linear or logarithmic x axis
+//! ([`Scale`]); and a grid of such charts under one title ([`render_panels`]).
 //!
 //! plotters' bitmap backend draws into an RGB buffer that the `image` crate encodes as PNG. Text is
 //! rasterised by plotters' `ab_glyph` font support with DejaVu Sans embedded from the `dejavu` crate
 //! (Bitstream Vera / DejaVu font licence), so no system font, fontconfig or freetype is needed.
 //!
-//! Limitations: one linear x axis and one linear y axis (no log scale); the x axis spans exactly
-//! the finite data (the y axis is widened to the enclosing ticks unless [`Chart::y_range`] fixes
-//! it, and data outside a fixed range is clipped at the plot's edge); labels that do not fit are
-//! clipped at the image border rather than wrapped, and legend labels are cut at 40 characters;
-//! points with a non-finite coordinate are skipped and break the polyline (and band) there, like
-//! matplotlib; bands expect the points of a series in increasing x order.
+//! Limitations: the y axis is linear; the x axis spans exactly the finite data unless
+//! [`Chart::x_range`] fixes it (the y axis is widened to the enclosing ticks unless
+//! [`Chart::y_range`] fixes it, and data outside a fixed y range is clipped at the plot's edge);
+//! labels that do not fit are clipped at the image border rather than wrapped, and legend labels
+//! are cut at 40 characters; points with a non-finite coordinate are skipped and break the polyline
+//! (and band) there, like matplotlib; bands expect the points of a series in increasing x order.
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -65,6 +68,9 @@ pub enum PlotError {
         /// Upper bound given.
         max: f64,
     },
+    /// `Chart::x_range` is not finite and increasing, or a log-scale x axis would show x ≤ 0.
+    #[error("chart x axis: {0}")]
+    BadXAxis(String),
     /// A series' `band` does not have one half-width per point.
     #[error("series {label:?}: band has {band} values but there are {points} points")]
     BandLength {
@@ -87,14 +93,18 @@ pub struct Series {
     /// Data points `(x, y)`, normally in increasing x; non-finite points are skipped.
     pub points: Vec<(f64, f64)>,
     /// Optional ± half-width per point (same length as `points`), drawn as a translucent fill
-    /// between `y - band` and `y + band`; non-finite values leave a gap.
+    /// between `y - band` and `y + band` (or as error bars, [`Series::bars`]); non-finite values
+    /// leave a gap.
     pub band: Option<Vec<f64>>,
+    /// Draw the band as a vertical error bar at each point instead of a fill (for points far apart,
+    /// like a few training-set sizes).
+    pub bars: bool,
 }
 
 impl Series {
     /// A series without a band.
     pub fn new(label: impl Into<String>, color: [u8; 3], points: Vec<(f64, f64)>) -> Self {
-        Self { label: label.into(), color, points, band: None }
+        Self { label: label.into(), color, points, band: None, bars: false }
     }
 }
 
@@ -113,6 +123,40 @@ pub struct Chart {
     pub width: u32,
     /// Image height in pixels (64..=16384).
     pub height: u32,
+    /// The x axis's scale.
+    pub x_scale: Scale,
+    /// Fixed x axis range; `None` spans the data.
+    pub x_range: Option<(f64, f64)>,
+    /// The x ticks to show (e.g. the training-set sizes that were run); `None` chooses them.
+    pub x_ticks: Option<Vec<f64>>,
+    /// A dashed black horizontal line at `y`, with its legend label (e.g. a bound).
+    pub reference: Option<(String, f64)>,
+    /// Where the legend goes.
+    pub legend: Legend,
+    /// Text size relative to the default (below 1 for the small panels of [`render_panels`]).
+    pub text_scale: f64,
+}
+
+/// The x axis's scale.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Scale {
+    /// Linear.
+    #[default]
+    Linear,
+    /// Logarithmic: equal ratios are equal distances (x must be positive).
+    Log,
+}
+
+/// Where a chart's legend goes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Legend {
+    /// Right of the plot (the plot is narrowed to make room).
+    #[default]
+    Right,
+    /// Inside the plot, in its lower-right corner.
+    LowerRight,
+    /// No legend.
+    Hidden,
 }
 
 impl Chart {
@@ -125,6 +169,12 @@ impl Chart {
             y_range: None,
             width: 900,
             height: 560,
+            x_scale: Scale::Linear,
+            x_range: None,
+            x_ticks: None,
+            reference: None,
+            legend: Legend::Right,
+            text_scale: 1.0,
         }
     }
 }
@@ -254,9 +304,8 @@ const SWATCH_W: i32 = 22;
 const LEGEND_PAD: i32 = 8;
 const LEGEND_MAX_CHARS: usize = 40;
 
-/// Registers DejaVu Sans (from the `dejavu` crate) as plotters' `sans-serif` font, once per process
-/// (for charts drawn with plotters directly, like the rotation-estimation report's log-scale ones).
-pub fn ensure_font() -> Result<(), PlotError> {
+/// Registers DejaVu Sans (from the `dejavu` crate) as plotters' `sans-serif` font, once per process.
+fn ensure_font() -> Result<(), PlotError> {
     static REGISTERED: OnceLock<bool> = OnceLock::new();
     let ok = *REGISTERED.get_or_init(|| register_font(FONT, FontStyle::Normal, dejavu::sans::regular()).is_ok());
     if ok { Ok(()) } else { Err(PlotError::Draw("the embedded DejaVu Sans font could not be loaded".into())) }
@@ -286,6 +335,18 @@ fn validate(chart: &Chart, series: &[Series]) -> Result<(), PlotError> {
         && !(min.is_finite() && max.is_finite() && min < max)
     {
         return Err(PlotError::BadYRange { min, max });
+    }
+    if let Some((min, max)) = chart.x_range
+        && !(min.is_finite() && max.is_finite() && min < max)
+    {
+        return Err(PlotError::BadXAxis(format!("x_range ({min}, {max}) must be finite with min < max")));
+    }
+    if chart.x_scale == Scale::Log {
+        let low = chart.x_range.map(|r| r.0).into_iter();
+        let xs = series.iter().flat_map(|s| s.points.iter().filter(|p| finite_point(p)).map(|p| p.0));
+        if let Some(x) = low.chain(xs).find(|x| *x <= 0.0) {
+            return Err(PlotError::BadXAxis(format!("a log scale cannot show x = {x}")));
+        }
     }
     for s in series {
         if let Some(band) = &s.band
@@ -334,36 +395,80 @@ struct Axes {
     y_range: (f64, f64),
     x_ticks: Ticks,
     y_ticks: Ticks,
+    x_log: bool,
 }
 
 fn axes(chart: &Chart, series: &[Series]) -> Axes {
     let ext = extent(series);
-    let x_range = widen_degenerate(ext.map_or((0.0, 1.0), |e| e.0));
-    let x_ticks = nice_ticks(x_range.0, x_range.1, 8);
+    let x_range = chart.x_range.unwrap_or_else(|| match chart.x_scale {
+        Scale::Linear => widen_degenerate(ext.map_or((0.0, 1.0), |e| e.0)),
+        Scale::Log => {
+            let (a, b) = ext.map_or((1.0, 10.0), |e| e.0);
+            if b > a { (a, b) } else { (a / 2.0, a * 2.0) }
+        }
+    });
+    let x_ticks = match (&chart.x_ticks, chart.x_scale) {
+        (Some(values), _) => chosen_ticks(values),
+        (None, Scale::Linear) => nice_ticks(x_range.0, x_range.1, 8),
+        (None, Scale::Log) => log_ticks(x_range),
+    };
     let (y_range, y_ticks) = match chart.y_range {
         Some(r) => (r, nice_ticks(r.0, r.1, 6)),
         None => {
-            let r = widen_degenerate(ext.map_or((0.0, 1.0), |e| e.1));
-            let t = nice_ticks(r.0, r.1, 6);
+            let mut r = ext.map_or((0.0, 1.0), |e| e.1);
+            if let Some((_, y)) = &chart.reference {
+                r = (r.0.min(*y), r.1.max(*y));
+            }
+            let t = nice_ticks(widen_degenerate(r).0, widen_degenerate(r).1, 6);
             let r = (t.values[0], t.values[t.values.len() - 1]);
             (r, t)
         }
     };
-    Axes { x_range, y_range, x_ticks, y_ticks }
+    Axes { x_range, y_range, x_ticks, y_ticks, x_log: chart.x_scale == Scale::Log }
 }
 
-/// A linear plotters axis whose ticks (grid lines and labels) are ours: [`nice_ticks`] inside the
-/// range, labelled by `format_tick` with the ticks' step.
+/// Ticks a chart names, sorted, labelled with the decimals their smallest gap needs.
+fn chosen_ticks(values: &[f64]) -> Ticks {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    v.sort_by(f64::total_cmp);
+    v.dedup();
+    let gap = v.windows(2).map(|w| w[1] - w[0]).fold(f64::INFINITY, f64::min);
+    let step = if gap.is_finite() { 10f64.powf(gap.log10().floor()) } else { 1.0 };
+    Ticks { step, values: v }
+}
+
+/// 1, 2 and 5 × 10^k inside a positive range (the log scale's own ticks).
+fn log_ticks((lo, hi): (f64, f64)) -> Ticks {
+    let mut values = Vec::new();
+    for k in (lo.log10().floor() as i32)..=(hi.log10().ceil() as i32) {
+        for m in [1.0, 2.0, 5.0] {
+            let v = m * 10f64.powi(k);
+            if v >= lo * (1.0 - 1e-9) && v <= hi * (1.0 + 1e-9) {
+                values.push(v);
+            }
+        }
+    }
+    let step = values.first().map_or(1.0, |v| 10f64.powf(v.log10().floor()));
+    Ticks { step, values }
+}
+
+/// A plotters axis, linear or logarithmic, whose ticks (grid lines and labels) are ours:
+/// [`nice_ticks`] or the chart's own inside the range, labelled by `format_tick` with the ticks'
+/// step.
 #[derive(Clone)]
 struct TickedAxis {
+    range: (f64, f64),
+    /// The axis in the coordinate it is linear in: x, or ln x on a log scale.
     linear: RangedCoordf64,
+    log: bool,
     ticks: Vec<f64>,
     step: f64,
 }
 
 impl TickedAxis {
-    fn new(range: (f64, f64), ticks: &Ticks) -> Self {
-        Self { linear: (range.0..range.1).into(), ticks: ticks_inside(ticks, range), step: ticks.step }
+    fn new(range: (f64, f64), ticks: &Ticks, log: bool) -> Self {
+        let linear = if log { (range.0.ln()..range.1.ln()).into() } else { (range.0..range.1).into() };
+        Self { range, linear, log, ticks: ticks_inside(ticks, range), step: ticks.step }
     }
 }
 
@@ -372,7 +477,7 @@ impl Ranged for TickedAxis {
     type ValueType = f64;
 
     fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
-        self.linear.map(value, limit)
+        self.linear.map(&if self.log { value.ln() } else { *value }, limit)
     }
 
     /// Our ticks as plotters' bold key points; no light (minor) grid lines.
@@ -381,7 +486,7 @@ impl Ranged for TickedAxis {
     }
 
     fn range(&self) -> Range<f64> {
-        self.linear.range()
+        self.range.0..self.range.1
     }
 }
 
@@ -507,41 +612,76 @@ fn legend_label(s: &Series) -> String {
 
 /// Draws the chart into `buf` (RGB, `chart.width × chart.height`).
 fn draw(chart: &Chart, series: &[Series], buf: &mut [u8]) -> Result<PlotArea, PlotError> {
-    let axes = axes(chart, series);
-    let (w, h) = (chart.width, chart.height);
-    let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
-    root.fill(&WHITE).map_err(draw_err)?;
+    let root = BitMapBackend::with_buffer(buf, (chart.width, chart.height)).into_drawing_area();
+    let frame = draw_on(&root, chart, series)?;
+    root.present().map_err(draw_err)?;
+    Ok(frame)
+}
 
-    let tick_font = (FONT, TICK_SIZE).into_font().color(&BLACK);
-    let label_font = (FONT, LABEL_SIZE).into_font().color(&BLACK);
-    let text_w = |text: &str, font: &TextStyle| root.estimate_text_size(text, font).map(|(tw, _)| tw as i32);
+/// `x` at fraction `t` of the x axis (geometric on a log scale).
+fn x_at(axes: &Axes, t: f64) -> f64 {
+    let (a, b) = axes.x_range;
+    if axes.x_log { a * (b / a).powf(t) } else { a + t * (b - a) }
+}
+
+/// Draws the chart on `area` (which it fills: the chart's own width and height are not used).
+fn draw_on<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    chart: &Chart,
+    series: &[Series],
+) -> Result<PlotArea, PlotError> {
+    let axes = axes(chart, series);
+    let (w, h) = area.dim_in_pixel();
+    let base = area.get_base_pixel();
+    area.fill(&WHITE).map_err(draw_err)?;
+
+    let k = chart.text_scale;
+    let (title_size, label_size, tick_size) = (TITLE_SIZE * k, LABEL_SIZE * k, TICK_SIZE * k);
+    let tick_font = (FONT, tick_size).into_font().color(&BLACK);
+    let label_font = (FONT, label_size).into_font().color(&BLACK);
+    let text_w = |text: &str, font: &TextStyle| area.estimate_text_size(text, font).map(|(tw, _)| tw as i32);
+
+    // The legend's entries: each series, then the reference line.
+    let mut entries: Vec<(String, RGBColor, bool)> =
+        series.iter().map(|s| (legend_label(s), rgb(s.color), false)).collect();
+    if let Some((label, _)) = &chart.reference {
+        entries.push((label.chars().take(LEGEND_MAX_CHARS).collect(), BLACK, true));
+    }
+    if chart.legend == Legend::Hidden {
+        entries.clear();
+    }
+    let swatch_w = (SWATCH_W as f64 * k) as i32;
+    let pad = (LEGEND_PAD as f64 * k).max(3.0) as i32;
+    let mut legend_w = 0;
+    for (label, _, _) in &entries {
+        legend_w = legend_w.max(text_w(label, &label_font).map_err(draw_err)?);
+    }
+    if !entries.is_empty() {
+        legend_w += 3 * pad + swatch_w;
+    }
 
     // Margins sized from the text they hold, never more than a third of the canvas.
     let mut y_tick_w = 0;
     for v in ticks_inside(&axes.y_ticks, axes.y_range) {
         y_tick_w = y_tick_w.max(text_w(&format_tick(v, axes.y_ticks.step), &tick_font).map_err(draw_err)?);
     }
-    let mut legend_w = 0;
-    for s in series {
-        legend_w = legend_w.max(text_w(&legend_label(s), &label_font).map_err(draw_err)?);
-    }
-    if !series.is_empty() {
-        legend_w += 3 * LEGEND_PAD + SWATCH_W;
-    }
     let third_w = w as i32 / 3;
     let third_h = h as i32 / 3;
-    let y_area = (y_tick_w + 12 + if chart.y_label.is_empty() { 0 } else { LABEL_SIZE as i32 + 10 }).min(third_w);
+    let y_area = (y_tick_w + 12 + if chart.y_label.is_empty() { 0 } else { label_size as i32 + 10 }).min(third_w);
     let x_area =
-        (TICK_SIZE as i32 + 14 + if chart.x_label.is_empty() { 0 } else { LABEL_SIZE as i32 + 10 }).min(third_h);
-    let right = (legend_w + 2 * LEGEND_PAD).max(24).min(third_w);
+        (tick_size as i32 + 14 + if chart.x_label.is_empty() { 0 } else { label_size as i32 + 10 }).min(third_h);
+    let right = match chart.legend {
+        Legend::Right if !entries.is_empty() => (legend_w + 2 * pad).max(24).min(third_w),
+        _ => 24,
+    };
 
-    let mut builder = ChartBuilder::on(&root);
-    builder.margin(12).margin_right(right).x_label_area_size(x_area).y_label_area_size(y_area);
+    let mut builder = ChartBuilder::on(area);
+    builder.margin((12.0 * k) as i32).margin_right(right).x_label_area_size(x_area).y_label_area_size(y_area);
     if !chart.title.is_empty() {
-        builder.caption(&chart.title, (FONT, TITLE_SIZE).into_font().color(&BLACK));
+        builder.caption(&chart.title, (FONT, title_size).into_font().color(&BLACK));
     }
-    let x_axis = TickedAxis::new(axes.x_range, &axes.x_ticks);
-    let y_axis = TickedAxis::new(axes.y_range, &axes.y_ticks);
+    let x_axis = TickedAxis::new(axes.x_range, &axes.x_ticks, axes.x_log);
+    let y_axis = TickedAxis::new(axes.y_range, &axes.y_ticks, false);
     let mut ctx = builder.build_cartesian_2d(x_axis, y_axis).map_err(draw_err)?;
 
     let mut mesh = ctx.configure_mesh();
@@ -558,9 +698,9 @@ fn draw(chart: &Chart, series: &[Series], buf: &mut [u8]) -> Result<PlotArea, Pl
     }
     mesh.draw().map_err(draw_err)?;
 
-    // Data: bands first, then lines, then markers, so that lines stay on top of every band.
+    // Data: fills first, then lines, error bars and markers, so that lines stay on top of every fill.
     let (lo, hi) = axes.y_range;
-    for s in series {
+    for s in series.iter().filter(|s| !s.bars) {
         if let Some(band) = &s.band {
             let fill = rgb(s.color).mix(BAND_ALPHA).filled();
             ctx.draw_series(band_polygons(s, band, lo, hi).into_iter().map(|poly| Polygon::new(poly, fill)))
@@ -572,41 +712,73 @@ fn draw(chart: &Chart, series: &[Series], buf: &mut [u8]) -> Result<PlotArea, Pl
         ctx.draw_series(clip_polyline(&s.points, lo, hi).into_iter().map(|run| PathElement::new(run, style)))
             .map_err(draw_err)?;
     }
+    for s in series.iter().filter(|s| s.bars) {
+        let Some(band) = &s.band else { continue };
+        let bar = |(p, h): (&(f64, f64), &f64)| {
+            let ok = finite_point(p) && h.is_finite();
+            ok.then(|| clip_polyline(&[(p.0, p.1 - h.abs()), (p.0, p.1 + h.abs())], lo, hi)).into_iter().flatten()
+        };
+        let style = rgb(s.color).stroke_width(LINE_WIDTH);
+        ctx.draw_series(s.points.iter().zip(band).flat_map(bar).map(|run| PathElement::new(run, style)))
+            .map_err(draw_err)?;
+    }
     for s in series {
         let fill = rgb(s.color).filled();
         let inside = |p: &&(f64, f64)| finite_point(p) && p.1 >= lo && p.1 <= hi;
         ctx.draw_series(s.points.iter().filter(inside).map(|&p| Circle::new(p, MARKER_RADIUS, fill)))
             .map_err(draw_err)?;
     }
+    if let Some((_, y)) = chart.reference.as_ref().filter(|(_, y)| (lo..=hi).contains(y)) {
+        // 40 dashes, evenly spaced along the axis
+        let dash = |d: usize| {
+            PathElement::new(
+                vec![(x_at(&axes, d as f64 / 40.0), *y), (x_at(&axes, (d as f64 + 0.5) / 40.0), *y)],
+                BLACK.stroke_width(LINE_WIDTH),
+            )
+        };
+        ctx.draw_series((0..40).map(dash)).map_err(draw_err)?;
+    }
 
-    // Axes box on top of the data.
+    // Axes box on top of the data (pixel ranges are the backend's; the area draws relative to its base).
     let (x_px, y_px) = ctx.plotting_area().get_pixel_range();
-    root.draw(&Rectangle::new([(x_px.start, y_px.start), (x_px.end - 1, y_px.end - 1)], AXIS.stroke_width(1)))
-        .map_err(draw_err)?;
+    let (bx, by) = base;
+    let (x0, x1, y0, y1) = (x_px.start - bx, x_px.end - bx, y_px.start - by, y_px.end - by);
+    area.draw(&Rectangle::new([(x0, y0), (x1 - 1, y1 - 1)], AXIS.stroke_width(1))).map_err(draw_err)?;
 
-    // Legend, right of the plot: a swatch (line and marker) and the label per series.
-    if !series.is_empty() {
-        let row_h = LABEL_SIZE as i32 + 9;
-        let x0 = x_px.end + 12;
-        let y0 = y_px.start;
-        let box_h = LEGEND_PAD + row_h * series.len() as i32;
-        root.draw(&Rectangle::new([(x0, y0), (x0 + legend_w, y0 + box_h)], LEGEND_BORDER.stroke_width(1)))
-            .map_err(draw_err)?;
-        for (i, s) in series.iter().enumerate() {
-            let cy = y0 + LEGEND_PAD / 2 + row_h * i as i32 + row_h / 2;
-            let sx = x0 + LEGEND_PAD;
-            let color = rgb(s.color);
-            root.draw(&PathElement::new(vec![(sx, cy), (sx + SWATCH_W, cy)], color.stroke_width(LINE_WIDTH)))
+    // Legend: a swatch (line and marker, or a dashed line) and the label per entry.
+    if !entries.is_empty() {
+        let row_h = label_size as i32 + (9.0 * k) as i32;
+        let box_h = pad + row_h * entries.len() as i32;
+        let (lx, ly) = match chart.legend {
+            Legend::LowerRight => (x1 - legend_w - pad, y1 - box_h - pad),
+            _ => (x1 + 12, y0),
+        };
+        let frame = Rectangle::new([(lx, ly), (lx + legend_w, ly + box_h)], LEGEND_BORDER.stroke_width(1));
+        if chart.legend == Legend::LowerRight {
+            area.draw(&Rectangle::new([(lx, ly), (lx + legend_w, ly + box_h)], WHITE.mix(0.85).filled()))
                 .map_err(draw_err)?;
-            root.draw(&Circle::new((sx + SWATCH_W / 2, cy), MARKER_RADIUS, color.filled())).map_err(draw_err)?;
+        }
+        area.draw(&frame).map_err(draw_err)?;
+        for (i, (label, color, dashed)) in entries.iter().enumerate() {
+            let cy = ly + pad / 2 + row_h * i as i32 + row_h / 2;
+            let sx = lx + pad;
+            let line = color.stroke_width(LINE_WIDTH);
+            if *dashed {
+                for d in 0..3 {
+                    let x = sx + d * swatch_w / 3;
+                    area.draw(&PathElement::new(vec![(x, cy), (x + swatch_w / 6, cy)], line)).map_err(draw_err)?;
+                }
+            } else {
+                area.draw(&PathElement::new(vec![(sx, cy), (sx + swatch_w, cy)], line)).map_err(draw_err)?;
+                area.draw(&Circle::new((sx + swatch_w / 2, cy), MARKER_RADIUS, color.filled())).map_err(draw_err)?;
+            }
             let style = label_font.pos(plotters::style::text_anchor::Pos::new(
                 plotters::style::text_anchor::HPos::Left,
                 plotters::style::text_anchor::VPos::Center,
             ));
-            root.draw(&Text::new(legend_label(s), (sx + SWATCH_W + LEGEND_PAD, cy), style)).map_err(draw_err)?;
+            area.draw(&Text::new(label.clone(), (sx + swatch_w + pad, cy), style)).map_err(draw_err)?;
         }
     }
-    root.present().map_err(draw_err)?;
     Ok(PlotArea { x_px, y_px, axes })
 }
 
@@ -620,6 +792,44 @@ pub fn render(chart: &Chart, series: &[Series]) -> Result<RgbImage, PlotError> {
         .ok_or_else(|| PlotError::Draw("the drawing buffer does not match the chart size".into()))
 }
 
+/// Height of the title strip above [`render_panels`]'s charts, in pixels.
+const PANELS_TITLE_H: u32 = 40;
+
+/// Charts side by side, `cols` to a row (a row not filled is left blank), under one `title`: each
+/// cell is as large as the largest chart's `width × height`. A chart's own title is its caption.
+pub fn render_panels(title: &str, panels: &[(Chart, Vec<Series>)], cols: usize) -> Result<RgbImage, PlotError> {
+    ensure_font()?;
+    for (c, s) in panels {
+        validate(c, s)?;
+    }
+    let cols = cols.max(1);
+    let rows = panels.len().div_ceil(cols).max(1);
+    let cell = panels.iter().fold((64, 64), |(w, h), (c, _)| (w.max(c.width), h.max(c.height)));
+    let (w, h) = (cell.0 * cols as u32, PANELS_TITLE_H + cell.1 * rows as u32);
+    let mut buf = vec![0u8; w as usize * h as usize * 3];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_err)?;
+        let (top, rest) = root.split_vertically(PANELS_TITLE_H);
+        top.titled(title, (FONT, TITLE_SIZE * 0.9).into_font().color(&BLACK)).map_err(draw_err)?;
+        for ((chart, series), area) in panels.iter().zip(rest.split_evenly((rows, cols))) {
+            draw_on(&area, chart, series)?;
+        }
+        root.present().map_err(draw_err)?;
+    }
+    RgbImage::from_raw(w, h, buf).ok_or_else(|| PlotError::Draw("the drawing buffer does not match the panels".into()))
+}
+
+/// [`render_panels`] written as a PNG file at `path`, whole or not at all.
+pub fn write_panels_png(
+    path: &Path,
+    title: &str,
+    panels: &[(Chart, Vec<Series>)],
+    cols: usize,
+) -> Result<(), PlotError> {
+    encode_png(path, &render_panels(title, panels, cols)?)
+}
+
 /// Draws the chart and writes it as a PNG file at `path`, replacing it whole or not at all
 /// ([`equiarm_types::files::replace`]). The file's directory must already exist.
 pub fn write_png(path: &Path, chart: &Chart, series: &[Series]) -> Result<(), PlotError> {
@@ -629,7 +839,10 @@ pub fn write_png(path: &Path, chart: &Chart, series: &[Series]) -> Result<(), Pl
     {
         return Err(PlotError::MissingDirectory { path: path.to_path_buf(), dir: dir.to_path_buf() });
     }
-    let img = render(chart, series)?;
+    encode_png(path, &render(chart, series)?)
+}
+
+fn encode_png(path: &Path, img: &RgbImage) -> Result<(), PlotError> {
     let mut png = std::io::Cursor::new(Vec::new());
     img.write_to(&mut png, ImageFormat::Png).map_err(|cause| PlotError::Encode { path: path.to_path_buf(), cause })?;
     Ok(equiarm_types::files::replace(path, png.into_inner())?)
@@ -892,5 +1105,82 @@ mod tests {
         assert!(matches!(render(&chart, &[]), Err(PlotError::BadYRange { .. })));
         let chart = Chart { width: 0, ..Chart::default() };
         assert!(matches!(render(&chart, &[]), Err(PlotError::BadSize { .. })));
+        let log = Chart { x_scale: Scale::Log, ..Chart::default() };
+        let err = render(&log, &[Series::new("zero", palette(0), vec![(0.0, 1.0), (10.0, 1.0)])]).unwrap_err();
+        assert!(matches!(err, PlotError::BadXAxis(_)) && err.to_string().contains("x = 0"), "{err}");
+        let chart = Chart { x_range: Some((2.0, 1.0)), ..Chart::default() };
+        assert!(matches!(render(&chart, &[]), Err(PlotError::BadXAxis(_))));
+    }
+
+    /// Whether `color` is within 2 px of `(x, y)`.
+    fn near_pixel(img: &RgbImage, (x, y): (u32, u32), color: [u8; 3]) -> bool {
+        (-2..=2).any(|dy: i32| {
+            (-2..=2).any(|dx: i32| img.get_pixel(x.wrapping_add_signed(dx), y.wrapping_add_signed(dy)).0 == color)
+        })
+    }
+
+    #[test]
+    fn a_log_axis_puts_equal_ratios_at_equal_distances_with_the_ticks_named() {
+        let chart = Chart {
+            x_scale: Scale::Log,
+            x_range: Some((10.0, 1000.0)),
+            x_ticks: Some(vec![400.0, 100.0, 100.0]),
+            y_range: Some((0.0, 1.0)),
+            ..Chart::new("t", "x", "y")
+        };
+        let color = [200, 30, 40];
+        let s = Series::new("s", color, vec![(100.0, 0.5)]);
+        let (img, frame) = render_framed(&chart, &[s]);
+        assert_eq!(frame.axes.x_ticks.values, vec![100.0, 400.0]);
+        // 100 is the geometric middle of 10 … 1000
+        let mid = ((frame.x_px.start + frame.x_px.end) / 2) as u32;
+        let row = ((frame.y_px.start + frame.y_px.end) / 2) as u32;
+        assert!(near_pixel(&img, (mid, row), color), "the point is not at the middle of the log axis");
+        assert_eq!(log_ticks((1.0, 60.0)).values, vec![1.0, 2.0, 5.0, 10.0, 20.0, 50.0]);
+    }
+
+    #[test]
+    fn error_bars_span_one_band_width_at_each_point_and_the_reference_is_dashed() {
+        let chart = Chart {
+            y_range: Some((0.0, 1.0)),
+            reference: Some(("bound".into(), 0.25)),
+            legend: Legend::LowerRight,
+            ..Chart::new("t", "x", "y")
+        };
+        let color = [200, 30, 40];
+        let s =
+            Series { band: Some(vec![0.2, 0.2]), bars: true, ..Series::new("s", color, vec![(0.0, 0.6), (10.0, 0.6)]) };
+        let (img, frame) = render_framed(&chart, &[s]);
+        // on the bar of the first point, 0.15 above it; not between the points at that height
+        let (x, y) = px(&frame, 0.0, 0.75);
+        assert!(near_pixel(&img, (x + 2, y), color), "no error bar at ({x}, {y})");
+        let (x, y) = px(&frame, 5.0, 0.75);
+        assert!(!near_pixel(&img, (x, y), color), "a bar where there is no point");
+        // the reference line: black dashes and gaps along y = 0.25
+        let (_, ry) = px(&frame, 0.0, 0.25);
+        let blacks = (frame.x_px.start as u32 + 4..frame.x_px.end as u32 - 4)
+            .filter(|&x| (ry - 1..=ry + 1).any(|y| img.get_pixel(x, y).0 == [0, 0, 0]))
+            .count();
+        let width = (frame.x_px.end - frame.x_px.start - 8) as usize;
+        assert!(blacks > width / 3 && blacks < width * 2 / 3, "{blacks} of {width} columns black: not dashed");
+    }
+
+    #[test]
+    fn panels_are_laid_out_in_rows_under_one_title() {
+        let chart = |t: &str| Chart {
+            width: 200,
+            height: 150,
+            text_scale: 0.7,
+            legend: Legend::Hidden,
+            ..Chart::new(t, "", "")
+        };
+        let series = vec![Series::new("s", palette(0), vec![(1.0, 0.5), (2.0, 0.7)])];
+        let panels: Vec<(Chart, Vec<Series>)> = ["a", "b", "c"].iter().map(|t| (chart(t), series.clone())).collect();
+        let img = render_panels("three", &panels, 2).unwrap();
+        assert_eq!((img.width(), img.height()), (400, PANELS_TITLE_H + 300));
+        // the third panel (second row, first column) has its curve; the fourth cell is blank
+        let drawn =
+            |x0: u32, y0: u32| (x0..x0 + 200).any(|x| (y0..y0 + 150).any(|y| img.get_pixel(x, y).0 == palette(0)));
+        assert!(drawn(0, PANELS_TITLE_H + 150) && !drawn(200, PANELS_TITLE_H + 150));
     }
 }

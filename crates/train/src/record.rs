@@ -186,12 +186,14 @@ impl RunRecord {
                 color: palette(0),
                 points: self.evals.iter().map(|e| (e.updates as f64, e.success_rate)).collect(),
                 band: None,
+                bars: false,
             },
             Series {
                 label: "discounted return".into(),
                 color: palette(1),
                 points: self.evals.iter().map(|e| (e.updates as f64, e.discounted_return)).collect(),
                 band: None,
+                bars: false,
             },
         ];
         let cfg = &self.cfg;
