@@ -254,8 +254,8 @@ impl GridSpec for ExperimentGrid {
 
     /// A new run's directory is cleared of whatever a start killed before its first checkpoint
     /// left, and gets the cell's `config.json`.
-    fn start(&mut self, p: &Planned<Self::Run>) -> Result<Box<dyn Job>> {
-        if GridSpec::state(self, p)? == RunState::New {
+    fn start(&mut self, p: &Planned<Self::Run>, state: &RunState) -> Result<Box<dyn Job>> {
+        if *state == RunState::New {
             for f in RUN_FILES.iter().chain(&["learning_curve.png"]) {
                 let path = p.dir.join(f);
                 if path.is_dir() {

@@ -177,7 +177,7 @@ impl GridSpec for RotestGrid<'_> {
         }
     }
 
-    fn start(&mut self, p: &PlannedRun) -> Result<Box<dyn Job>> {
+    fn start(&mut self, p: &PlannedRun, _: &RunState) -> Result<Box<dyn Job>> {
         let (setting, cfg) = p.run.clone();
         let ds = match &self.dataset {
             Some((s, ds)) if *s == setting => Arc::clone(ds),

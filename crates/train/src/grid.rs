@@ -143,8 +143,9 @@ pub trait Grid {
     /// Where `run` stands now (read again after it ends, or before it starts: another runner on the
     /// same runs directory may have finished it).
     fn state(&self, run: &Planned<Self::Run>) -> Result<RunState, Self::Error>;
-    /// Starts `run` (its directory's lock is free; the job takes it).
-    fn start(&mut self, run: &Planned<Self::Run>) -> Result<Box<dyn Job>, Self::Error>;
+    /// Starts `run`, which stands at `state` (read just now; its directory's lock is free and the
+    /// job takes it).
+    fn start(&mut self, run: &Planned<Self::Run>, state: &RunState) -> Result<Box<dyn Job>, Self::Error>;
     /// Writes the report, when the runner ends without a stop or a failure; the files written.
     fn report(&mut self) -> Result<Vec<PathBuf>, Self::Error>;
 }
@@ -305,7 +306,7 @@ fn start_while_room<G: Grid>(
             RunState::Unfinished(what) => format!("continues ({what})"),
             RunState::New => "started".to_string(),
         };
-        let job = grid.start(&run)?;
+        let job = grid.start(&run, &state)?;
         eprintln!("{} {from} ({} of {total} left)", run.dir.display(), queue.len() + running.len() + 1);
         running.push(Running { run, job, started: Instant::now() });
     }
@@ -402,7 +403,7 @@ mod tests {
         fn state(&self, run: &Planned<u64>) -> Result<RunState, GridError> {
             Ok(if run.dir.join("done").is_file() { RunState::Finished("ok".into()) } else { RunState::New })
         }
-        fn start(&mut self, run: &Planned<u64>) -> Result<Box<dyn Job>, GridError> {
+        fn start(&mut self, run: &Planned<u64>, _: &RunState) -> Result<Box<dyn Job>, GridError> {
             let (dir, ms, fail) = (run.dir.clone(), run.run, self.fail.contains(&run.dir));
             Ok(Box::new(ThreadJob::spawn(move |stop| {
                 let _lock = RunDirLock::acquire(&dir).expect("free");
