@@ -578,3 +578,99 @@ fn a_replay_full_of_expert_transitions_drops_further_rows_and_training_goes_on()
     let m = equiarm_sac::learner::read_manifest(&run_dir.join("checkpoints/step_0000003")).unwrap();
     assert_eq!((m.replay_len, m.expert_len), (6, 6));
 }
+
+/// A resumed trainer goes on evaluating: the eval env's episodes that end once the update count
+/// reaches the next multiple of `eval_every` after the checkpoint's last evaluation are counted (an
+/// evaluation in evals.json beside the first process's), the ones before it are not. (Session
+/// twenty-nine saw a DDS run record no evaluation after `--resume`; it did not happen again with the
+/// suite, stopped by SIGINT and resumed twice, so this pins the trainer's part of it.)
+#[test]
+fn a_resumed_trainer_records_the_evaluations_due_after_its_checkpoint() {
+    let run_dir = support::scratch("learn_dds_resume_evals");
+    let cfg = |total| {
+        let mut c = TrainConfig {
+            image_size: SIZE as usize,
+            batch_size: 4,
+            training_starts: 4,
+            total_updates: total,
+            num_envs: 1,
+            demo_episodes: 0,
+            eval_every: 2,
+            eval_episodes: 2,
+            checkpoint_every: 0,
+            ..TrainConfig::reduced(equiarm_types::TaskKind::BlockPulling)
+        };
+        (c.agent.input_size, c.agent.hidden) = (16, 8);
+        c
+    };
+    let opts = |resume: bool| TrainerOptions {
+        run_dir: run_dir.clone(),
+        resume: resume.then(|| run_dir.clone()),
+        force: false,
+        eval_namespace: "/eval".into(),
+        deterministic: false,
+        device: equiarm_nn::device::open("cpu").unwrap(),
+        weights_every: 0,
+        progress: false,
+    };
+    let eval = |episode| EpisodeResult {
+        env: "/eval".into(),
+        episode,
+        eval: true,
+        success: true,
+        steps: 5,
+        ..Default::default()
+    };
+    // Trains to the config's total, feeding an agent episode of 4 steps (episode `e`, from `seq`)
+    // before each update it owes, and two eval episodes once the update count is one of `evals_at`.
+    let train = |trainer: &mut Trainer, learner: &mut equiarm_sac::learner::Learner, first: u32, evals_at: &[u64]| {
+        let mut e = first;
+        let (mut seq, mut fed) = (1000 * first as u64, None);
+        loop {
+            let next = trainer.with_learner(learner, false).unwrap();
+            // (the trainer learns the update count here, as in the node's loop)
+            let u = learner.updates();
+            if evals_at.contains(&u) && fed != Some(u) {
+                for k in 0..2 {
+                    trainer.episode(eval(100 * u as u32 + k)).unwrap();
+                }
+                fed = Some(u);
+            }
+            if trainer.stop_reason(false, Duration::from_secs(60)).is_some() {
+                return;
+            }
+            if !next.update {
+                for k in 0..4 {
+                    trainer.observation(&observation("env0", e, seq, seq as u8));
+                    trainer.observation(&observation("env0", e, seq + 1, seq as u8 + 1));
+                    trainer.transition(transition("env0", e, seq, false, k == 3));
+                    seq += 1;
+                }
+                trainer.episode(result("env0", e, false, false)).unwrap();
+                (e, seq) = (e + 1, seq + 1);
+                continue;
+            }
+            let m = learner.update().unwrap();
+            trainer.updated(learner, m).unwrap();
+        }
+    };
+    let updates_of = |evals: &str| -> Vec<u64> {
+        let v: serde_json::Value = serde_json::from_str(evals).unwrap();
+        v.as_array().unwrap().iter().map(|e| e["updates"].as_u64().unwrap()).collect()
+    };
+
+    // First process: eval episodes after updates 1 (not due yet) and 2 (due): one evaluation, at 2.
+    let (mut trainer, mut learner) = Trainer::open(cfg(3), opts(false)).unwrap();
+    train(&mut trainer, &mut learner, 0, &[1, 2]);
+    trainer.finish(&mut learner, "total_updates reached").unwrap();
+    assert_eq!(updates_of(&std::fs::read_to_string(run_dir.join("evals.json")).unwrap()), vec![2]);
+
+    // Resumed at 3: episodes after update 3 are not due (the next is 4), those after 4 and 6 are.
+    let (mut trainer, mut learner) = Trainer::open(cfg(7), opts(true)).unwrap();
+    assert_eq!(learner.updates(), 3);
+    train(&mut trainer, &mut learner, 50, &[3, 4, 6]);
+    let summary = trainer.finish(&mut learner, "total_updates reached").unwrap();
+    assert_eq!(summary.updates, 7);
+    let evals = std::fs::read_to_string(run_dir.join("evals.json")).unwrap();
+    assert_eq!(updates_of(&evals), vec![2, 4, 6], "{evals}");
+}
