@@ -183,9 +183,11 @@ async fn cyclonedds_ls_lists_our_topics_under_ros2_names() {
 /// `equiarm sim --clock`, driven by the Cyclone DDS peer as an expert policy: the peer receives
 /// `/clock` (rosgraph_msgs/msg/Clock) never decreasing (a re-published Observation repeats its time),
 /// each value the stamp of an Observation (or of the episode's terminal observation), and every
-/// Observation's stamp on it.
+/// Observation's stamp on it. The same run's frames, as tf2 listeners see them: `/tf_static` holds
+/// the camera's pose (`world` → `camera_optical_frame`) equal to the simulator's camera, and `/tf`
+/// holds the gripper (`world` → `clk/gripper`) at every Observation's stamp.
 #[test]
-fn sim_clock_reaches_cyclonedds_monotonic_and_equal_to_the_observation_stamps() {
+fn sim_clock_and_tf_reach_cyclonedds_with_the_observation_stamps() {
     const DOMAIN: u16 = 76;
     let mut sim = std::process::Command::new(env!("CARGO_BIN_EXE_equiarm"))
         .args(["sim", "--clock", "--task", "block_pulling", "--namespace", "/clk", "--seed", "3"])
@@ -216,4 +218,29 @@ fn sim_clock_reaches_cyclonedds_monotonic_and_equal_to_the_observation_stamps() 
     let mut distinct = clock.clone();
     distinct.dedup();
     assert_eq!(distinct.len(), obs.len() + 1, "one /clock time per observation and the terminal one");
+
+    // /tf_static: the camera, bit-exact as the simulator computes it for this config.
+    let env = equiarm_sim::Env::new(equiarm_sim::EnvConfig {
+        task: equiarm_types::TaskKind::BlockPulling,
+        ..Default::default()
+    })
+    .unwrap();
+    let want = &equiarm_train::stepper::tf_static(&env).transforms[0];
+    let (v, q) = (&want.transform.translation, &want.transform.rotation);
+    let camera: Vec<_> = lines.iter().filter(|l| l["event"] == "tf_static").collect();
+    assert_eq!(camera.len(), 1, "one camera transform on /tf_static: {lines:?}");
+    assert_eq!(
+        (camera[0]["parent"].as_str(), camera[0]["child"].as_str()),
+        (Some("world"), Some("camera_optical_frame"))
+    );
+    assert_eq!(camera[0]["translation"], serde_json::json!([v.x, v.y, v.z]));
+    assert_eq!(camera[0]["rotation"], serde_json::json!([q.x, q.y, q.z, q.w]));
+    // /tf: the gripper at each observation's stamp (and the terminal one's), above the table.
+    let gripper: Vec<_> = lines.iter().filter(|l| l["event"] == "tf").collect();
+    assert!(gripper.iter().all(|l| l["parent"] == "world" && l["child"] == "clk/gripper"), "{gripper:?}");
+    assert!(gripper.iter().all(|l| (0.0..0.3).contains(&l["translation"][2].as_f64().unwrap())), "{gripper:?}");
+    let tf: Vec<i64> = gripper.iter().map(|l| nanos(l)).collect();
+    for t in obs.iter().chain(&episode) {
+        assert!(tf.contains(t), "no /tf at the observation stamp {t} ns: {tf:?}");
+    }
 }

@@ -259,6 +259,11 @@ cdr_targets! {
     "cdr_region_of_interest" => equiarm_msgs::sensor_msgs::RegionOfInterest,
     "cdr_image" => equiarm_msgs::sensor_msgs::Image,
     "cdr_camera_info" => equiarm_msgs::sensor_msgs::CameraInfo,
+    "cdr_vector3" => equiarm_msgs::geometry_msgs::Vector3,
+    "cdr_quaternion" => equiarm_msgs::geometry_msgs::Quaternion,
+    "cdr_transform" => equiarm_msgs::geometry_msgs::Transform,
+    "cdr_transform_stamped" => equiarm_msgs::geometry_msgs::TransformStamped,
+    "cdr_tf_message" => equiarm_msgs::tf2_msgs::TFMessage,
     "cdr_gripper_command" => equiarm_msgs::msg::GripperCommand,
     "cdr_observation" => equiarm_msgs::msg::Observation,
     "cdr_transition" => equiarm_msgs::msg::Transition,
@@ -315,6 +320,43 @@ impl Samples for equiarm_msgs::rosgraph_msgs::Clock {
 impl Samples for equiarm_msgs::std_msgs::Header {
     fn samples() -> Vec<Self> {
         vec![header(), Self::new(stamp(), "camera_side_rgbd_optical_frame")]
+    }
+}
+
+fn transform(child: &str, x: f64) -> equiarm_msgs::geometry_msgs::TransformStamped {
+    use equiarm_msgs::geometry_msgs::{Quaternion, Transform, Vector3};
+    let rotation = Quaternion { x: 0.0, y: 0.0, z: 0.38268343236508984, w: 0.9238795325112867 };
+    let transform = Transform { translation: Vector3 { x, y: -0.1, z: 0.05 }, rotation };
+    equiarm_msgs::geometry_msgs::TransformStamped { header: header(), child_frame_id: child.into(), transform }
+}
+
+impl Samples for equiarm_msgs::geometry_msgs::Vector3 {
+    fn samples() -> Vec<Self> {
+        vec![transform("a", 0.5).transform.translation]
+    }
+}
+
+impl Samples for equiarm_msgs::geometry_msgs::Quaternion {
+    fn samples() -> Vec<Self> {
+        vec![transform("a", 0.5).transform.rotation]
+    }
+}
+
+impl Samples for equiarm_msgs::geometry_msgs::Transform {
+    fn samples() -> Vec<Self> {
+        vec![transform("a", 0.5).transform]
+    }
+}
+
+impl Samples for equiarm_msgs::geometry_msgs::TransformStamped {
+    fn samples() -> Vec<Self> {
+        vec![transform("env0/gripper", 0.5)]
+    }
+}
+
+impl Samples for equiarm_msgs::tf2_msgs::TFMessage {
+    fn samples() -> Vec<Self> {
+        vec![Self { transforms: vec![transform("camera_optical_frame", 0.7), transform("env0/gripper", 0.4)] }]
     }
 }
 

@@ -2,11 +2,12 @@
 //!
 //! The types are generated at build time from the `.msg` files of this crate's folder (`msgs/msg/`
 //! for our package `equiarm_msgs`, `msgs/ros_std/` for the standard `builtin_interfaces`,
-//! `std_msgs`, `sensor_msgs` and `rosgraph_msgs` types we use), so field order, types, units (documented on each field)
+//! `std_msgs`, `sensor_msgs`, `rosgraph_msgs`, `geometry_msgs` and `tf2_msgs` types we use), so field order, types, units (documented on each field)
 //! and the schema text written into bags can never disagree. The same `msg/` folder is a ROS 2
 //! interface package: `colcon build` gives rclpy users the Python types.
 //!
-//! Modules: [`msg`] (ours), [`builtin_interfaces`], [`std_msgs`], [`sensor_msgs`], [`rosgraph_msgs`]. Every type
+//! Modules: [`msg`] (ours), [`builtin_interfaces`], [`std_msgs`], [`sensor_msgs`], [`rosgraph_msgs`],
+//! [`geometry_msgs`], [`tf2_msgs`]. Every type
 //! implements [`RosMessage`]; [`cdr`] encodes and decodes them exactly as ROS 2 does on the wire
 //! (XCDR1 little endian with its 4-byte encapsulation header).
 //!

@@ -54,5 +54,5 @@ fn names_and_constants_come_from_the_msg_files() {
     }
     assert_eq!(TypeInfo::find("sensor_msgs/Image").unwrap().type_name, "sensor_msgs/msg/Image");
     assert!(TypeInfo::find("sensor_msgs/msg/Imag").is_none());
-    assert_eq!(ALL_TYPES.len(), 12);
+    assert_eq!(ALL_TYPES.len(), 17);
 }

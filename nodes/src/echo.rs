@@ -116,6 +116,26 @@ macro_rules! with_message_type {
                 type $M = equiarm_msgs::sensor_msgs::RegionOfInterest;
                 Ok($body)
             }
+            Some(equiarm_msgs::geometry_msgs::Vector3::TYPE_NAME) => {
+                type $M = equiarm_msgs::geometry_msgs::Vector3;
+                Ok($body)
+            }
+            Some(equiarm_msgs::geometry_msgs::Quaternion::TYPE_NAME) => {
+                type $M = equiarm_msgs::geometry_msgs::Quaternion;
+                Ok($body)
+            }
+            Some(equiarm_msgs::geometry_msgs::Transform::TYPE_NAME) => {
+                type $M = equiarm_msgs::geometry_msgs::Transform;
+                Ok($body)
+            }
+            Some(equiarm_msgs::geometry_msgs::TransformStamped::TYPE_NAME) => {
+                type $M = equiarm_msgs::geometry_msgs::TransformStamped;
+                Ok($body)
+            }
+            Some(equiarm_msgs::tf2_msgs::TFMessage::TYPE_NAME) => {
+                type $M = equiarm_msgs::tf2_msgs::TFMessage;
+                Ok($body)
+            }
             Some(equiarm_msgs::msg::GripperCommand::TYPE_NAME) => {
                 type $M = equiarm_msgs::msg::GripperCommand;
                 Ok($body)

@@ -5,7 +5,10 @@
 //! - publishes an `Observation` (seq, env, episode, step, rgb8 colour, 32FC1 depth in metres, holding,
 //!   the expert's action with `source = EXPERT` and `obs_seq = seq`) on `observation` (relative to the
 //!   namespace; reliable keep-last 10) and the same frame on `camera/color/image_raw`,
-//!   `camera/depth/image_raw` and `camera/camera_info` (best effort; one header stamp for all);
+//!   `camera/depth/image_raw` and `camera/camera_info` (best effort; one header stamp for all), and
+//!   the gripper's pose on `/tf` (`world` → `<env>/gripper`, reliable keep-last 100) at that stamp
+//!   (again with a re-publication);
+//!   once at start, the camera's pose on `/tf_static` (`world` → `camera_optical_frame`, latched);
 //! - waits for the `GripperCommand` on `gripper_cmd` whose `obs_seq` is that seq. A command for another
 //!   seq is counted and ignored; one with NaN/inf is rejected (warned, rate-limited) and counted, and
 //!   the node keeps waiting; no command within the timeout re-publishes the same Observation;
@@ -34,12 +37,13 @@ use anyhow::{Context as _, bail};
 use equiarm_msgs::builtin_interfaces::Time;
 use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, Transition};
 use equiarm_msgs::rosgraph_msgs::Clock;
+use equiarm_msgs::tf2_msgs::TFMessage;
 use equiarm_msgs::{
     sensor_msgs::{CameraInfo, Image},
     std_msgs::Header,
 };
 use equiarm_sim::{CameraConfig, Env, EnvConfig};
-use equiarm_train::stepper::{CAMERA_FRAME, SimStats, Step, Stepper};
+use equiarm_train::stepper::{CAMERA_FRAME, SimStats, Step, Stepper, tf_gripper, tf_static};
 use equiarm_types::{Corruption, TaskKind, ViewPreset};
 use log::{debug, info};
 
@@ -154,11 +158,16 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
         Ok(())
     };
     let camera = CameraPublishers::new(&mut node, sim.env())?;
+    // the frames: the camera's once (latched), the gripper's with each observation
+    let tf_static_pub = node.publisher::<TFMessage>("/tf_static", qos::latched())?;
+    tf_static_pub.publish(tf_static(sim.env())).await?;
+    let tf_pub = node.publisher::<TFMessage>("/tf", qos::stream(100))?;
     let signal = shutdown_signal();
     tokio::pin!(signal);
     'episodes: while sim.episodes_started() < args.episodes.unwrap_or(u32::MAX) {
         let mut obs = sim.reset()?.clone();
         publish_clock(&obs.header.stamp).await?;
+        publish_tf(&tf_pub, &sim, &env_name, &obs).await?;
         camera.publish(&node, &obs).await?;
         obs_pub.publish(obs.clone()).await?;
         loop {
@@ -182,12 +191,14 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
                         sim.stats.republished += 1;
                         debug!("no command for obs_seq {} within {timeout:?}; re-publishing", obs.seq);
                         publish_clock(&obs.header.stamp).await?;
+                        publish_tf(&tf_pub, &sim, &env_name, &obs).await?;
                         obs_pub.publish(obs.clone()).await?;
                     }
                 }
             };
             // The next frame first, then the Transition that names it.
             publish_clock(&next.header.stamp).await?;
+            publish_tf(&tf_pub, &sim, &env_name, &next).await?;
             camera.publish(&node, &next).await?;
             obs_pub.publish(next.clone()).await?;
             transition_pub.publish(transition).await?;
@@ -211,6 +222,14 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
     // the writer's next heartbeat (RustDDS: every 1 s once all was acknowledged).
     tokio::time::sleep(Duration::from_millis(1200)).await;
     Ok(sim.stats)
+}
+
+/// The gripper's pose on `/tf` at the stamp of `obs`, the observation the env is at now.
+async fn publish_tf(tf: &Publisher<TFMessage>, sim: &Stepper, env: &str, obs: &Observation) -> anyhow::Result<()> {
+    match tf_gripper(sim.env(), env, obs.header.stamp.clone()) {
+        Some(m) => tf.publish(m).await,
+        None => Ok(()),
+    }
 }
 
 /// The camera topics. Images are decoded from the Observation only while someone subscribes.

@@ -12,7 +12,8 @@ the wire. Every loop is bounded in count and time.
                                          Observation with its expert action) and print every /clock
                                          sample and every answered Observation's stamp ("obs"; the
                                          episode's terminal frame, which nothing answers, as
-                                         "terminal"), until an EpisodeResult
+                                         "terminal"), every transform on /tf_static and /tf,
+                                         until an EpisodeResult
 """
 
 import json
@@ -137,15 +138,34 @@ def clock(domain: int, seconds: float):
     obs_reader = DataReader(dp, Topic(dp, "rt/clk/observation", idl.Observation), qos=RCLPY_DEFAULT)
     episodes = DataReader(dp, Topic(dp, "rt/episodes", idl.EpisodeResult), qos=RCLPY_DEFAULT)
     cmd_writer = DataWriter(dp, Topic(dp, "rt/clk/gripper_cmd", idl.GripperCommand), qos=RCLPY_DEFAULT)
+    # tf2's listener profiles: /tf_static reliable + transient local (late joiners get the camera), /tf
+    # reliable keep-last 100
+    tf_static = DataReader(dp, Topic(dp, "rt/tf_static", idl.TFMessage), qos=Qos(
+        Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.TransientLocal, Policy.History.KeepLast(1),
+        Policy.DataRepresentation(use_cdrv0_representation=True)))
+    tf = DataReader(dp, Topic(dp, "rt/tf", idl.TFMessage), qos=Qos(
+        Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.Volatile, Policy.History.KeepLast(100),
+        Policy.DataRepresentation(use_cdrv0_representation=True)))
     deadline = time.monotonic() + seconds
     answered, ended = set(), False
     emit(event="ready")
-    # Answer nothing before both readers have matched the sim's writers: the sim re-publishes an
-    # unanswered Observation (and /clock with it) every second, so no stamp is missed on either.
-    while time.monotonic() < deadline and not (clock_reader.get_matched_publications()
-                                                 and obs_reader.get_matched_publications()):
+    # Answer nothing before every reader has matched the sim's writers: the sim re-publishes an
+    # unanswered Observation (and /clock and /tf with it) every second, so no stamp is missed.
+    readers = (clock_reader, obs_reader, tf_static, tf)
+    while time.monotonic() < deadline and not all(r.get_matched_publications() for r in readers):
         time.sleep(0.02)
+
+    def take_tf():
+        for topic, reader in (("tf_static", tf_static), ("tf", tf)):
+            for s in reader.take(N=100):
+                if isinstance(s, idl.TFMessage):
+                    for t in s.transforms:
+                        v, q = t.transform.translation, t.transform.rotation
+                        emit(event=topic, parent=t.header.frame_id, child=t.child_frame_id, sec=t.header.stamp.sec,
+                             nanosec=t.header.stamp.nanosec, translation=[v.x, v.y, v.z], rotation=[q.x, q.y, q.z, q.w])
+
     while time.monotonic() < deadline and not ended:
+        take_tf()
         idle = True
         for s in clock_reader.take(N=100):
             if isinstance(s, idl.Clock):
@@ -173,6 +193,7 @@ def clock(domain: int, seconds: float):
     for s in clock_reader.take(N=100):
         if isinstance(s, idl.Clock):
             emit(event="clock", sec=s.clock.sec, nanosec=s.clock.nanosec)
+    take_tf()
     emit(event="done", ended=ended)
 
 

@@ -169,7 +169,7 @@ def check_std_msgs_match_upstream(ts):
         ours = get_types_from_msg(p.read_text(), name)[name]
         assert ours == ts.fielddefs[name], f"{p}: fields differ from upstream {name}"
         n += 1
-    assert n == 6, n
+    assert n == 11, n
 
 
 def to_rosbags(ts, value):

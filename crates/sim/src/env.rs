@@ -177,6 +177,15 @@ impl Env {
         self.episode.as_ref().map(|e| &e.scene)
     }
 
+    /// The pose of the gripper's tool centre point in the world: origin at the TCP, turned by the
+    /// commanded yaw about the world's z axis (up). `None` before the first reset. The palm is
+    /// kinematic, so after a reset or a step this is where the gripper is.
+    pub fn gripper_pose(&self) -> Option<nalgebra::Isometry3<f64>> {
+        let g = &self.episode.as_ref()?.gripper;
+        let t = nalgebra::Translation3::new(g.tcp.x as f64, g.tcp.y as f64, g.tcp.z as f64);
+        Some(nalgebra::Isometry3::from_parts(t, nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, g.yaw as f64)))
+    }
+
     /// Starts a new episode from `seed`.
     pub fn reset(&mut self, seed: u64) -> Result<Observation> {
         let mut rng = Rng::new(seed);

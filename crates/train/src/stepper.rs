@@ -11,9 +11,12 @@
 //! step, `dt * substeps`) per observation made, from 0; wall time is never read.
 
 use equiarm_msgs::builtin_interfaces::Time;
+use equiarm_msgs::geometry_msgs::{Quaternion, Transform, TransformStamped, Vector3};
 use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, Transition};
 use equiarm_msgs::std_msgs::Header;
+use equiarm_msgs::tf2_msgs::TFMessage;
 use equiarm_sim::{Env, EnvConfig, SimError, rng::Rng};
+use nalgebra::Isometry3;
 
 use crate::policy::action_of;
 
@@ -21,6 +24,39 @@ use crate::policy::action_of;
 pub const WORLD_FRAME: &str = "world";
 /// Frame of the camera images and `CameraInfo` (optical convention: z forward, x right, y down).
 pub const CAMERA_FRAME: &str = "camera_optical_frame";
+
+/// The frame of env `env`'s gripper on `/tf`: `<env>/gripper` (every env has its own gripper, while
+/// the camera, the same in every env of a run, is one frame).
+pub fn gripper_frame(env: &str) -> String {
+    format!("{env}/gripper")
+}
+
+/// A transform from `parent` to `child` at `stamp`: the pose of `child` in `parent`.
+fn transform(parent: &str, child: String, pose: &Isometry3<f64>, stamp: Time) -> TransformStamped {
+    let (t, q) = (pose.translation.vector, pose.rotation.quaternion().coords);
+    TransformStamped {
+        header: Header::new(stamp, parent),
+        child_frame_id: child,
+        transform: Transform {
+            translation: Vector3 { x: t.x, y: t.y, z: t.z },
+            rotation: Quaternion { x: q.x, y: q.y, z: q.z, w: q.w },
+        },
+    }
+}
+
+/// What the sim publishes once on `/tf_static`: the camera's optical frame in the world
+/// ([`WORLD_FRAME`] → [`CAMERA_FRAME`], the camera's extrinsics inverted), stamped at simulated time 0.
+pub fn tf_static(env: &Env) -> TFMessage {
+    let pose = env.camera().optical_pose_in_world();
+    TFMessage { transforms: vec![transform(WORLD_FRAME, CAMERA_FRAME.to_string(), &pose, Time::default())] }
+}
+
+/// What the sim publishes on `/tf` with each observation: the gripper's TCP in the world
+/// ([`WORLD_FRAME`] → [`gripper_frame`]) at the observation's `stamp`; `None` before the first reset.
+pub fn tf_gripper(env: &Env, name: &str, stamp: Time) -> Option<TFMessage> {
+    let pose = env.gripper_pose()?;
+    Some(TFMessage { transforms: vec![transform(WORLD_FRAME, gripper_frame(name), &pose, stamp)] })
+}
 
 /// Why the stepper stopped.
 #[derive(Debug, thiserror::Error)]
@@ -308,5 +344,44 @@ mod tests {
         assert_eq!(clock.tick().as_nanos(), 0);
         assert_eq!(clock.tick().as_nanos(), clock.step_ns);
         assert!((clock.step_ns - 166_666_667).abs() < 100, "1/6 s up to f32 dt: {}", clock.step_ns);
+    }
+
+    /// A point given in a TransformStamped's child frame, in its parent frame.
+    fn apply(t: &TransformStamped, p: [f64; 3]) -> nalgebra::Point3<f64> {
+        let (v, q) = (&t.transform.translation, &t.transform.rotation);
+        let rot = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z));
+        rot * nalgebra::Point3::from(p) + nalgebra::Vector3::new(v.x, v.y, v.z)
+    }
+
+    #[test]
+    fn tf_places_the_camera_where_it_projects_from_and_the_gripper_at_its_tcp() {
+        let mut env = Env::new(EnvConfig::new(equiarm_types::TaskKind::BlockPulling)).unwrap();
+        assert!(tf_gripper(&env, "env3", Time::default()).is_none(), "no gripper before a reset");
+        let cam = tf_static(&env).transforms;
+        assert_eq!(
+            (cam.len(), cam[0].header.frame_id.as_str(), cam[0].child_frame_id.as_str()),
+            (1, WORLD_FRAME, CAMERA_FRAME)
+        );
+        // A point given in the optical frame (x right, y down, z forward) projects as the pinhole
+        // model of CameraInfo's K says: u = fx x / z + cx, v = fy y / z + cy, at planar depth z.
+        let p = apply(&cam[0], [0.1, -0.05, 0.5]);
+        let (u, v, depth) = env.camera().project(p).unwrap();
+        let k = env.camera().camera_info_k();
+        assert!(
+            (u - (k[0] * 0.2 + k[2])).abs() < 1e-6 && (v - (k[4] * -0.1 + k[5])).abs() < 1e-6,
+            "({u}, {v}), K {k:?}"
+        );
+        assert!((depth - 0.5).abs() < 1e-9, "{depth}");
+        let q = &cam[0].transform.rotation;
+        assert!((q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w - 1.0).abs() < 1e-12, "a unit quaternion");
+
+        env.reset(7).unwrap();
+        let stamp = Time { sec: 2, nanosec: 5 };
+        let g = tf_gripper(&env, "env3", stamp.clone()).unwrap().transforms;
+        assert_eq!((g[0].header.frame_id.as_str(), g[0].child_frame_id.as_str()), (WORLD_FRAME, "env3/gripper"));
+        assert_eq!(g[0].header.stamp, stamp);
+        let tcp = env.gripper_pose().unwrap().translation.vector;
+        assert_eq!(apply(&g[0], [0.0; 3]).coords, tcp);
+        assert!(tcp.z > 0.0 && tcp.z < 0.3, "above the table, inside the workspace: {tcp:?}");
     }
 }
