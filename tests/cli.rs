@@ -117,13 +117,15 @@ fn out_of_range_numbers_are_refused_at_the_flag_naming_the_range() {
     let bag = bag.to_str().unwrap();
     let run = dir.join("run");
     let run = run.to_str().unwrap();
-    let cases: [(&[&str], &str); 13] = [
+    let cases: [(&[&str], &str); 19] = [
         (&["record", "-o", bag, "--all", "--duration-s", "inf"], "outside (0, 2592000]"),
         (&["record", "-o", bag, "--all", "--duration-s", "NaN"], "outside (0, 2592000]"),
         (&["record", "-o", bag, "--all", "--flush-ms", "18446744073709551615"], "outside 1..=3600000"),
         (&["record", "-o", bag, "--all", "--polling-interval-ms", "0"], "outside 1..=3600000"),
         (&["record", "-o", bag, "--all", "--split-size-mb", "0"], "split-size-mb"),
-        (&["bag", "play", bag, "--rate=-1"], "outside [0, 1000]"),
+        (&["bag", "play", bag, "--rate=-1"], "outside [0.001, 1000] (or 0"),
+        // regression (issue 61): a Duration of 1e300 s panicked
+        (&["bag", "play", bag, "--rate", "1e-300"], "outside [0.001, 1000] (or 0"),
         (&["bag", "play", bag, "--lockstep", "0"], "outside 1..=3600000"),
         (&["sim", "--timeout-ms", "18446744073709551615"], "outside 1..=3600000"),
         (&["policy", "--steps-per-update", "18446744073709551615"], "outside 1..=1000000"),
@@ -131,6 +133,14 @@ fn out_of_range_numbers_are_refused_at_the_flag_naming_the_range() {
         (&["train", "--in-process", "--run-dir", run, "--num-envs", "1000000"], "num_envs"),
         (&["train", "--in-process", "--run-dir", run, "--hidden", "100000000"], "agent.hidden"),
         (&["train", "--in-process", "--run-dir", run, "--batch-size", "1000000000"], "batch_size"),
+        // regression (issue 61): 0 was taken as 1
+        (&["experiment", "run", "tasks", "--parallel", "0"], "0 is not in 1..=64"),
+        // regression (issue 61): hundreds of GB allocated, then an abort; a batch of 0 printed a
+        // table of zeros, read as perfect equivariance
+        (&["nn", "check-equivariance", "--fresh", "--size", "100000"], "outside 8..=256"),
+        (&["nn", "check-equivariance", "--fresh", "--batch", "100000000"], "outside 1..=64"),
+        (&["nn", "check-equivariance", "--fresh", "--batch", "0"], "outside 1..=64"),
+        (&["nn", "check-equivariance", "--fresh", "--hidden", "100000000"], "outside 8..=512"),
     ];
     for (args, expected) in cases {
         let start = Instant::now();

@@ -9,6 +9,9 @@ pub const MAX_SECONDS: f64 = 30.0 * 24.0 * 3600.0;
 pub const MAX_MILLIS: u64 = 3_600_000;
 /// Largest speed factor accepted by `bag play --rate`.
 pub const MAX_RATE: f64 = 1000.0;
+/// Smallest positive speed factor accepted by `bag play --rate` (a second of the bag in about 17
+/// minutes); 0 means as fast as possible.
+pub const MIN_RATE: f64 = 0.001;
 /// Largest step budget accepted by the policy's flow control (`--max-lead`, `--steps-per-update`).
 pub const MAX_STEPS: u64 = 1_000_000;
 
@@ -68,15 +71,16 @@ pub fn millis_or_zero(s: &str) -> Result<u64, BadValue> {
     bounded(s, "ms", 0, MAX_MILLIS)
 }
 
-/// A speed factor: finite, 0 (as fast as possible) ..= [`MAX_RATE`].
+/// A speed factor: 0 (as fast as possible), or [`MIN_RATE`] ..= [`MAX_RATE`] (a tiny positive
+/// rate would stretch the bag's gaps past what a duration holds).
 pub fn rate(s: &str) -> Result<f64, BadValue> {
     let v = number(s, "number")?;
-    if (0.0..=MAX_RATE).contains(&v) {
+    if v == 0.0 || (MIN_RATE..=MAX_RATE).contains(&v) {
         Ok(v)
     } else {
         Err(BadValue::OutOfRange {
             given: format!("rate {s}"),
-            range: format!("[0, {MAX_RATE}] (0: as fast as possible)"),
+            range: format!("[{MIN_RATE}, {MAX_RATE}] (or 0: as fast as possible)"),
         })
     }
 }
@@ -132,6 +136,9 @@ mod tests {
         assert_eq!(millis_or_zero("0"), Ok(0));
         assert_eq!(rate("0"), Ok(0.0));
         assert!(rate("-1").is_err() && rate("inf").is_err() && rate("1e6").is_err());
+        // regression (issue 61): 1e-300 passed and the player panicked making a Duration of it
+        assert_eq!(rate("0.001"), Ok(0.001));
+        assert!(rate("1e-300").unwrap_err().to_string().contains("[0.001, 1000]"));
         assert_eq!(steps("0"), Ok(0));
         assert!(positive_steps("0").is_err() && steps("1000001").is_err());
     }

@@ -232,6 +232,7 @@ pub async fn run(opts: &RosOptions, cfg: PlayConfig) -> anyhow::Result<(u64, u64
             continue;
         }
         if cfg.rate > 0.0 {
+            // (the rate's bounds keep this within a Duration: at most 2^64 ns / MIN_RATE, about 1.8e13 s)
             let due = Duration::from_secs_f64(log_time.saturating_sub(t0) as f64 / 1e9 / cfg.rate);
             if let Some(wait) = due.checked_sub(start.elapsed())
                 && or_stop!(tokio::time::sleep(wait)).is_none()

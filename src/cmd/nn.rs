@@ -45,22 +45,28 @@ pub enum NnCommand {
         /// Architecture: `paper` (hidden 64, 128 px) or `reduced` (hidden 16, 64 px); the flags below override it.
         #[arg(long, value_enum, default_value_t = NetPreset::Paper)]
         config: NetPreset,
-        /// Hidden size (regular fields of the encoder output).
-        #[arg(long)]
+        /// Hidden size (regular fields of the encoder output), 8..=512.
+        #[arg(long, value_parser = |s: &str| within(s, "fields", 8, equiarm_sac::config::MAX_HIDDEN))]
         hidden: Option<usize>,
-        /// Input size in pixels.
-        #[arg(long)]
+        /// Input size in pixels, 8..=256.
+        #[arg(long, value_parser = |s: &str| within(s, "px", 8, 256))]
         size: Option<usize>,
-        /// Input channels.
-        #[arg(long)]
+        /// Input channels, 1..=16.
+        #[arg(long, value_parser = |s: &str| within(s, "channels", 1, 16))]
         channels: Option<usize>,
-        /// Random inputs to average over.
-        #[arg(long, default_value_t = 2)]
+        /// Random inputs to average over, 1..=64.
+        #[arg(long, default_value_t = 2, value_parser = |s: &str| within(s, "inputs", 1, 64))]
         batch: usize,
         /// Seed of the inputs (and of the fresh weights).
         #[arg(long, default_value_t = 0)]
         seed: u64,
     },
+}
+
+/// A size flag of `nn check-equivariance` in `min ..= max`: every size allocates the network's
+/// tensors before any check, so a typo must fail at the flag.
+fn within(s: &str, unit: &str, min: usize, max: usize) -> Result<usize, equiarm_nodes::cli_values::BadValue> {
+    equiarm_nodes::cli_values::bounded(s, unit, min as u64, max as u64).map(|v| v as usize)
 }
 
 /// Runs `equiarm nn`.

@@ -23,8 +23,8 @@ pub enum ExperimentCommand {
         /// The grid and its runs.
         #[command(flatten)]
         at: Where,
-        /// Runs at a time (default: one per core).
-        #[arg(long)]
+        /// Runs at a time, 1..=64 (default: one per core).
+        #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
         parallel: Option<usize>,
         /// Threads per run.
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=256))]

@@ -200,9 +200,9 @@ impl Grid {
                 return Err(bad(format!("updates: `{task}` is not one of this grid's tasks")));
             }
         }
-        if f.heldout_episodes > equiarm_sac::config::MAX_EPISODES {
+        if !(1..=equiarm_sac::config::MAX_EPISODES).contains(&f.heldout_episodes) {
             return Err(bad(format!(
-                "heldout_episodes: {} is above {}",
+                "heldout_episodes: {} must be 1..={} (a success rate over no episodes means nothing)",
                 f.heldout_episodes,
                 equiarm_sac::config::MAX_EPISODES
             )));
@@ -401,6 +401,9 @@ mod tests {
             (format!("{BASE}[config]\nbatch_sise = 10"), "batch_sise"),
             (format!("{BASE}[config]\nbatch_size = 0"), "batch_size"),
             (format!("{BASE}checkpoint_minutes = 0"), "checkpoint_minutes"),
+            // regression (issue 61): "held-out success -0.00 over 0 episodes" went into result.json
+            (format!("{BASE}heldout_episodes = 0"), "heldout_episodes"),
+            (format!("{BASE}[config]\nagent = {{ expert_weight = -1.0 }}"), "expert_weight"),
             (format!("{BASE}colour = 1"), "colour"),
             (BASE.replace("seeds = [0, 1]", "seeds = []"), "seeds"),
             (BASE.replace("seeds = [0, 1]", "seeds = [1, 1]"), "twice"),

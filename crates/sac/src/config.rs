@@ -31,6 +31,12 @@ use equiarm_types::{Corruption, TaskKind, ViewPreset};
 pub const MAX_IMAGE_SIZE: usize = crate::frame::StoredFrame::MAX_SIZE;
 /// Largest `agent.hidden` accepted (the paper: 64).
 pub const MAX_HIDDEN: usize = 512;
+/// Largest learning rate accepted (`agent.lr`): Adam steps of this size already diverge.
+pub const MAX_LR: f64 = 1.0;
+/// Largest behaviour-cloning weight accepted (`agent.expert_weight`; the paper's is 1).
+pub const MAX_EXPERT_WEIGHT: f64 = 1000.0;
+/// Largest magnitude of `agent.target_entropy` accepted (the action has 5 dimensions).
+pub const MAX_TARGET_ENTROPY: f64 = 100.0;
 /// Largest batch accepted (the paper: 128; 4,096 frames of 152 px are 1.9 GB of network input).
 pub const MAX_BATCH: usize = 4096;
 /// Largest number of envs accepted (the paper: 5).
@@ -246,8 +252,11 @@ impl TrainConfig {
                 ),
             );
         }
-        if !(self.agent.lr > 0.0 && self.agent.lr.is_finite()) {
-            return err("agent.lr", format!("{} must be positive", self.agent.lr));
+        if !(self.agent.lr > 0.0 && self.agent.lr <= MAX_LR) {
+            return err(
+                "agent.lr",
+                format!("{} must be in (0, {MAX_LR}] (a larger step diverges at once; the paper: 1e-3)", self.agent.lr),
+            );
         }
         if let Some(f) = self.agent.lr_final
             && !(f > 0.0 && f <= self.agent.lr)
@@ -259,6 +268,27 @@ impl TrainConfig {
         }
         if self.agent.init_alpha.is_nan() || self.agent.init_alpha <= 0.0 {
             return err("agent.init_alpha", format!("{} must be positive", self.agent.init_alpha));
+        }
+        // Signs and magnitudes that make a run meaningless without failing it: a negative expert
+        // weight rewards moving away from the demonstrations (the actor loss runs off to -1e30), and
+        // a target entropy far outside the action's range drives alpha to 0 or to infinity.
+        let w = self.agent.expert_weight;
+        if !(0.0..=MAX_EXPERT_WEIGHT).contains(&w) {
+            return err(
+                "agent.expert_weight",
+                format!(
+                    "{w} must be in [0, {MAX_EXPERT_WEIGHT}] (0: no behaviour cloning; the paper: 1 on the expert's transitions)"
+                ),
+            );
+        }
+        let h = self.agent.target_entropy;
+        if !(-MAX_TARGET_ENTROPY..=MAX_TARGET_ENTROPY).contains(&h) {
+            return err(
+                "agent.target_entropy",
+                format!(
+                    "{h} must be in [-{MAX_TARGET_ENTROPY}, {MAX_TARGET_ENTROPY}] (the usual choice: minus the action's 5 dimensions)"
+                ),
+            );
         }
         if let Augmentation::Drq { k, m } = self.augmentation
             && (k == 0 || m == 0)
@@ -390,6 +420,35 @@ mod tests {
         // The bounds themselves are accepted.
         let mut c = base.clone();
         (c.batch_size, c.num_envs, c.agent.hidden) = (MAX_BATCH, MAX_ENVS, MAX_HIDDEN);
+        c.validate().unwrap();
+    }
+
+    /// Regression (issue 61): a negative expert weight (actor loss -1.3e30, exit 0), a target entropy
+    /// of 1e30 and a learning rate of 1e300 were accepted.
+    #[test]
+    fn signs_and_magnitudes_that_make_a_run_meaningless_are_refused_naming_the_field() {
+        type Set = fn(&mut TrainConfig);
+        let cases: [(&str, Set); 7] = [
+            ("agent.expert_weight", |c| c.agent.expert_weight = -1.0),
+            ("agent.expert_weight", |c| c.agent.expert_weight = f64::NAN),
+            ("agent.expert_weight", |c| c.agent.expert_weight = 1e9),
+            ("agent.target_entropy", |c| c.agent.target_entropy = 1e30),
+            ("agent.target_entropy", |c| c.agent.target_entropy = f64::NEG_INFINITY),
+            ("agent.lr", |c| c.agent.lr = 1e300),
+            ("agent.lr", |c| c.agent.lr = f64::NAN),
+        ];
+        for (field, set) in cases {
+            let mut c = TrainConfig::reduced16(TaskKind::BlockPulling);
+            set(&mut c);
+            let e = c.validate().unwrap_err();
+            assert_eq!(e.field, field, "{e:?}");
+            assert!(e.message.contains("must be in"), "{field}: {}", e.message);
+        }
+        // The edges are accepted: no behaviour cloning, the largest weight and step.
+        let mut c = TrainConfig::reduced16(TaskKind::BlockPulling);
+        (c.agent.expert_weight, c.agent.lr, c.agent.target_entropy) = (0.0, MAX_LR, -MAX_TARGET_ENTROPY);
+        c.validate().unwrap();
+        c.agent.expert_weight = MAX_EXPERT_WEIGHT;
         c.validate().unwrap();
     }
 }
