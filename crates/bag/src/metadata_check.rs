@@ -4,6 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use yaml_rust2::parser::{Event, Parser};
 use yaml_rust2::{Yaml, YamlLoader};
 
 use crate::BagInfo;
@@ -32,8 +33,16 @@ fn int(y: &Yaml) -> Option<u64> {
 /// no `metadata.yaml` (a recorder that was killed, or a single `.mcap` file).
 pub fn check(dir: &Path, info: &BagInfo) -> Option<MetadataCheck> {
     let path = dir.join("metadata.yaml");
-    let text = match std::fs::read(&path) {
+    let size = match std::fs::metadata(&path) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return None,
+        Err(e) => return Some(MetadataCheck { problems: vec![format!("cannot be read: {e}")], path }),
+        Ok(m) => m.len(),
+    };
+    if size > MAX_BYTES {
+        let why = format!("is {size} bytes, more than the {MAX_BYTES} read: not read");
+        return Some(MetadataCheck { problems: vec![why], path });
+    }
+    let text = match std::fs::read(&path) {
         Err(e) => return Some(MetadataCheck { problems: vec![format!("cannot be read: {e}")], path }),
         Ok(bytes) => String::from_utf8_lossy(&bytes).into_owned(),
     };
@@ -42,7 +51,36 @@ pub fn check(dir: &Path, info: &BagInfo) -> Option<MetadataCheck> {
     Some(MetadataCheck { path, problems })
 }
 
+/// The `metadata.yaml` versions rosbag2 has written, up to Jazzy's 8 (the one we write); the fields
+/// checked here have meant the same in all of them.
+const KNOWN_VERSIONS: std::ops::RangeInclusive<u64> = 1..=8;
+/// Largest `metadata.yaml` read (one of a bag of 10,000 files and 1,000 topics is about 2 MB).
+const MAX_BYTES: u64 = 16 << 20;
+
+/// Why `text` is not loaded into a tree, if it is not: YAML that uses an alias, which the loader
+/// expands by copying the node it names, so a few kB of aliases of aliases become gigabytes; rosbag2
+/// never writes one. Read as a stream of events, which costs the text's size; a syntax error is left
+/// to the loader to report (its parser also refuses nesting deeper than about 250 levels).
+fn unbounded(text: &str) -> Option<String> {
+    let mut parser = Parser::new_from_str(text);
+    loop {
+        match parser.next_token() {
+            Err(_) | Ok((Event::StreamEnd, _)) => return None,
+            Ok((Event::Alias(_), mark)) => {
+                return Some(format!(
+                    "uses a YAML alias (line {}): rosbag2 never writes one, and its expansion is unbounded; not read",
+                    mark.line()
+                ));
+            }
+            Ok(_) => {}
+        }
+    }
+}
+
 fn compare(text: &str, info: &BagInfo, problems: &mut Vec<String>) {
+    if let Some(why) = unbounded(text) {
+        return problems.push(why);
+    }
     let docs = match YamlLoader::load_from_str(text) {
         Ok(d) => d,
         Err(e) => return problems.push(format!("not YAML: {e}")),
@@ -51,6 +89,15 @@ fn compare(text: &str, info: &BagInfo, problems: &mut Vec<String>) {
         Some(m @ Yaml::Hash(_)) => m,
         _ => return problems.push("has no `rosbag2_bagfile_information` map: not rosbag2 metadata".into()),
     };
+    match int(&m["version"]) {
+        Some(v) if KNOWN_VERSIONS.contains(&v) => {}
+        Some(v) => problems.push(format!(
+            "version is {v}, which this reader does not know ({}..={}): its fields may mean something else",
+            KNOWN_VERSIONS.start(),
+            KNOWN_VERSIONS.end()
+        )),
+        None => problems.push("version is missing or not a number".into()),
+    }
     match m["storage_identifier"].as_str() {
         Some("mcap") => {}
         other => problems.push(format!("storage_identifier is {other:?}, not \"mcap\"")),

@@ -143,6 +143,9 @@ pub struct BagInfo {
 /// A bag opened for reading.
 pub struct Reader {
     files: Vec<(PathBuf, memmap2::Mmap)>,
+    /// Files of a bag directory that hold nothing (0 bytes: a recorder killed right at a split, or a
+    /// full disk), skipped and reported by every read.
+    empty: Vec<PathBuf>,
     /// The bag directory, when opened as one.
     dir: Option<PathBuf>,
 }
@@ -155,7 +158,8 @@ fn split_index(name: &str) -> Option<u64> {
 
 impl Reader {
     /// Opens a bag directory or a single `.mcap` file. Fails, naming the file, if it is empty or not
-    /// MCAP.
+    /// MCAP; in a directory, an empty file beside others is skipped (reads report it as truncated)
+    /// and only a directory whose files are all empty fails.
     pub fn open(path: &Path) -> Result<Self, BagError> {
         let meta = std::fs::metadata(path).map_err(at(path))?;
         let mut paths = Vec::new();
@@ -178,12 +182,13 @@ impl Reader {
         if paths.is_empty() {
             return Err(BagError::NoFiles { path: path.into() });
         }
-        let mut files = Vec::new();
+        let (mut files, mut empty) = (Vec::new(), Vec::new());
         for p in paths {
             let f = File::open(&p).map_err(at(&p))?;
             let len = f.metadata().map_err(at(&p))?.len();
             if len == 0 {
-                return Err(BagError::Empty { path: p });
+                empty.push(p);
+                continue;
             }
             // SAFETY: the map is read-only; the crate docs tell users not to modify a bag while it is
             // read (a concurrent truncation could fault, as with any mmap reader).
@@ -193,7 +198,13 @@ impl Reader {
             }
             files.push((p, map));
         }
-        Ok(Self { files, dir: meta.is_dir().then(|| path.to_path_buf()) })
+        if files.is_empty() || !meta.is_dir() {
+            if let Some(p) = empty.into_iter().next() {
+                return Err(BagError::Empty { path: p });
+            }
+            return Ok(Self { files, empty: Vec::new(), dir: None });
+        }
+        Ok(Self { files, empty, dir: Some(path.to_path_buf()) })
     }
 
     /// The files, in read order.
@@ -210,6 +221,12 @@ impl Reader {
         mut f: impl FnMut(&RecordedMessage<'_>) -> Result<(), E>,
     ) -> Result<Result<ReadReport, E>, BagError> {
         let mut report = ReadReport::default();
+        if let (ReadMode::Strict, Some(p)) = (mode, self.empty.first()) {
+            return Err(BagError::Empty { path: p.clone() });
+        }
+        for p in &self.empty {
+            report.truncated.push((p.clone(), "empty (0 bytes): nothing in it was read".into()));
+        }
         for (path, map) in &self.files {
             let complete = map.len() >= 2 * MAGIC.len() && map.ends_with(MAGIC) && mcap::read::footer(map).is_ok();
             let summary = if complete { mcap::Summary::read(map).ok().flatten() } else { None };
@@ -256,6 +273,14 @@ impl Reader {
             let FileRead { messages, complete, compression } = read;
             info.files.push(FileInfo { path: path.clone(), size: map.len() as u64, messages, complete, compression });
         }
+        for path in &self.empty {
+            let none =
+                FileInfo { path: path.clone(), size: 0, messages: 0, complete: false, compression: String::new() };
+            info.files.push(none);
+        }
+        let order =
+            |f: &FileInfo| f.path.file_name().and_then(|n| split_index(&n.to_string_lossy())).unwrap_or(u64::MAX);
+        info.files.sort_by_key(order);
         (info.truncated, info.lost) = (report.truncated, report.lost);
         info.metadata = self.dir.as_deref().and_then(|d| crate::metadata_check::check(d, &info));
         Ok(info)

@@ -113,3 +113,50 @@ fn a_damaged_chunk_in_a_file_without_footer_is_skipped_too() {
     // every chunk but the damaged one (the message indexes after the last chunk were cut too)
     assert_eq!(got.len() + in_victim, N as usize);
 }
+
+/// Regression (issue 61): a 0-byte split file (a recorder killed right at a split, or a full disk)
+/// made `bag recover`, `bag info` and `bag eval` refuse the whole bag, intact files included. It is
+/// skipped and reported as truncated; the other files are read and recovered; a directory of only
+/// empty files, and a single empty file, are still refused.
+#[test]
+fn an_empty_split_file_is_reported_and_the_other_files_are_read() {
+    let dir = scratch("empty_split");
+    let opts = WriterOptions { chunk_size: 2 << 10, split_bytes: Some(6 << 10), ..Default::default() };
+    let mut w = Writer::create(&dir.join("bag"), opts).unwrap();
+    let id = w
+        .add_topic(TopicInfo::of::<GripperCommand>("/env0/gripper_cmd", &[equiarm_bag::qos::OfferedQos::reliable(10)]))
+        .unwrap();
+    for k in 0..N {
+        let m = GripperCommand { obs_seq: k as u64, dx: 0.01, ..Default::default() };
+        let t = T0 + k as u64 * 1_000_000;
+        w.write(id, t, t, &cdr::encode(&m).unwrap()).unwrap();
+    }
+    let s = w.finish().unwrap();
+    assert!(s.files.len() >= 3, "{:?}", s.files);
+    let emptied = s.dir.join(&s.files[1]);
+    let lost = Reader::open(&emptied).unwrap().info().unwrap().messages;
+    std::fs::write(&emptied, b"").unwrap();
+
+    let info = Reader::open(&s.dir).unwrap().info().unwrap();
+    assert_eq!(info.messages, N as u64 - lost);
+    assert_eq!(info.files.len(), s.files.len(), "the empty file is listed too");
+    assert_eq!((info.files[1].size, info.files[1].messages, info.files[1].complete), (0, 0, false));
+    assert_eq!(info.truncated.len(), 1, "{:?}", info.truncated);
+    assert!(info.truncated[0].0 == emptied && info.truncated[0].1.contains("empty (0 bytes)"));
+    // metadata.yaml still lists the file: its count disagrees, and says so
+    let m = info.metadata.unwrap();
+    assert!(m.problems.iter().any(|p| p.contains(&format!("holds {lost} messages, it holds 0"))), "{:?}", m.problems);
+    let e = Reader::open(&s.dir).unwrap().for_each(ReadMode::Strict, |_| Ok::<(), ()>(())).err().unwrap();
+    assert!(matches!(e, BagError::Empty { .. }), "strict reads still refuse: {e}");
+
+    let out = dir.join("recovered");
+    let r = recover(&s.dir, &out, WriterOptions::default()).unwrap();
+    assert_eq!(r.truncated.len(), 1);
+    let (got, report) = seqs(&Reader::open(&out).unwrap(), ReadMode::Strict).unwrap();
+    assert_eq!((got.len() as u64, report.truncated.len()), (N as u64 - lost, 0));
+
+    for f in &s.files {
+        std::fs::write(s.dir.join(f), b"").unwrap();
+    }
+    assert!(matches!(Reader::open(&s.dir).err().unwrap(), BagError::Empty { .. }));
+}

@@ -66,3 +66,32 @@ fn stale_or_damaged_metadata_is_reported_naming_what_disagrees() {
     std::fs::remove_file(dir.join("metadata.yaml")).unwrap();
     assert_eq!(problems(&dir), None);
 }
+
+/// Regression (issue 61): a 4 KB `metadata.yaml` of aliases of aliases made `bag info` grow past
+/// 11 GB (the loader copies each alias's node), and a version 99 was accepted as matching; deep
+/// nesting is refused by the YAML parser itself.
+#[test]
+fn an_alias_bomb_a_deep_nest_and_an_unknown_version_are_reported_without_expanding() {
+    let dir = bag("aliases");
+    let mut bomb = String::from("a0: &a0 [x, x, x, x, x, x, x, x, x, x]\n");
+    for k in 1..40 {
+        let prev = format!("*a{}", k - 1);
+        bomb.push_str(&format!("a{k}: &a{k} [{}]\n", vec![prev; 10].join(", ")));
+    }
+    bomb.push_str("rosbag2_bagfile_information: *a39\n");
+    std::fs::write(dir.join("metadata.yaml"), &bomb).unwrap();
+    assert!(bomb.len() < 4096, "{}", bomb.len());
+    let p = problems(&dir).unwrap();
+    assert_eq!(p.len(), 1, "{p:?}");
+    assert!(p[0].contains("uses a YAML alias (line 2)"), "{p:?}");
+
+    std::fs::write(dir.join("metadata.yaml"), format!("{}1{}", "[".repeat(100_000), "]".repeat(100_000))).unwrap();
+    let p = problems(&dir).unwrap();
+    assert!(p[0].contains("not YAML: recursion limit exceeded"), "the parser's own bound: {p:?}");
+
+    let dir = bag("version");
+    edit(&dir, |y| y.replacen("version: 8", "version: 99", 1));
+    let p = problems(&dir).unwrap();
+    assert_eq!(p.len(), 1, "{p:?}");
+    assert!(p[0].contains("version is 99, which this reader does not know (1..=8)"), "{p:?}");
+}
