@@ -38,6 +38,8 @@ pub struct PlayConfig {
     /// sibling `.../gripper_cmd` that names its seq (re-publishing every this long, at most 10 times),
     /// instead of keeping the recorded pace. Drives a policy node from a bag as fast as it answers.
     pub lockstep: Option<Duration>,
+    /// Refuse a damaged or truncated bag instead of playing what is readable (warned either way).
+    pub strict: bool,
 }
 
 type PublishFuture<'a> = Pin<Box<dyn Future<Output = anyhow::Result<()>> + Send + 'a>>;
@@ -105,11 +107,12 @@ fn played_qos(offered_qos: &str) -> ros2_client::qos::QosProfile {
     }
 }
 
-/// Plays the bag once; returns (published, skipped) counts.
+/// Plays the bag once; returns (published, skipped) counts. What the bag lost (truncated files,
+/// damaged chunks) is warned first, as `bag info` reports it; with `strict` it is an error.
 pub async fn run(opts: &RosOptions, cfg: PlayConfig) -> anyhow::Result<(u64, u64)> {
     crate::signals::install()?; // first: a signal during start-up is then not lost
-    let reader = Reader::open(&cfg.bag)?;
-    let info = reader.info()?;
+    let info = Reader::open(&cfg.bag)?.info()?;
+    equiarm_train::bag_report::warn_damage(&cfg.bag, &info, cfg.strict)?;
     if info.messages == 0 {
         bail!("{}: the bag holds no messages", cfg.bag.display());
     }

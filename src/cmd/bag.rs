@@ -61,6 +61,10 @@ pub enum BagCommand {
         /// gripper_cmd topic (re-publishing every this many ms), instead of the recorded pace.
         #[arg(long, value_name = "MS", value_parser = equiarm_nodes::cli_values::millis)]
         lockstep: Option<u64>,
+        /// Refuse a damaged or truncated bag (exit 1) instead of playing what is readable; without
+        /// it the damage is warned, as `bag info` reports it, and play goes on.
+        #[arg(long)]
+        strict: bool,
     },
     /// Rewrites a bag whose recorder was killed as a complete, indexed bag.
     Recover {
@@ -94,7 +98,7 @@ pub fn run(c: BagCommand) -> anyhow::Result<ExitCode> {
                 print!("{}", report.table());
             }
         }
-        BagCommand::Play { bag, rate, remaps, wait_ms, lockstep } => {
+        BagCommand::Play { bag, rate, remaps, wait_ms, lockstep, strict } => {
             let mut pairs = Vec::new();
             for r in &remaps {
                 let Some((from, to)) = r.split_once(':') else { bail!("remap '{r}' must be FROM:TO") };
@@ -106,6 +110,7 @@ pub fn run(c: BagCommand) -> anyhow::Result<ExitCode> {
                 remaps: pairs,
                 wait_for_match: Duration::from_millis(wait_ms),
                 lockstep: lockstep.map(Duration::from_millis),
+                strict,
             };
             let opts = RosOptions::from_env()?;
             let (published, skipped) = super::runtime()?.block_on(equiarm_nodes::player::run(&opts, cfg))?;

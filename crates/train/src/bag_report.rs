@@ -41,11 +41,8 @@ pub fn info_text(path: &Path, info: &BagInfo) -> String {
     let _ = writeln!(s, "Start:        {:.3} s since the epoch", secs(info.start));
     let _ = writeln!(s, "End:          {:.3} s since the epoch", secs(info.end));
     let _ = writeln!(s, "Messages:     {}", info.messages);
-    for (p, why) in &info.truncated {
-        let _ = writeln!(s, "Damage:       {} ends early ({why})", p.file_name().unwrap_or_default().to_string_lossy());
-    }
-    for l in &info.lost {
-        let _ = writeln!(s, "Damage:       {}", lost_text(l));
+    for d in damage_lines(info) {
+        let _ = writeln!(s, "Damage:       {d}");
     }
     match &info.metadata {
         Some(m) if m.ok() => {
@@ -67,6 +64,32 @@ pub fn info_text(path: &Path, info: &BagInfo) -> String {
 }
 
 /// One line on a chunk that could not be read: file, place, time range, messages lost, reason.
+/// What a read of the bag lost, one line per truncated file and per damaged chunk (empty: nothing).
+pub fn damage_lines(info: &BagInfo) -> Vec<String> {
+    let ends = info
+        .truncated
+        .iter()
+        .map(|(p, why)| format!("{} ends early ({why})", p.file_name().unwrap_or_default().to_string_lossy()));
+    ends.chain(info.lost.iter().map(lost_text)).collect()
+}
+
+/// Warns each of [`damage_lines`] (naming the bag); with `strict`, damage is an error instead.
+pub fn warn_damage(path: &Path, info: &BagInfo, strict: bool) -> anyhow::Result<()> {
+    let damage = damage_lines(info);
+    for d in &damage {
+        log::warn!("{}: {d}", path.display());
+    }
+    if strict && !damage.is_empty() {
+        anyhow::bail!(
+            "{}: the bag is damaged ({} problem(s) above): `equiarm bag recover` it, or play it without --strict",
+            path.display(),
+            damage.len()
+        );
+    }
+    Ok(())
+}
+
+/// One damaged chunk: where, which times, why, and how many messages it took with it.
 pub fn lost_text(l: &equiarm_bag::LostChunk) -> String {
     let at = l.offset.map(|o| format!(" at byte {o}")).unwrap_or_default();
     let n = l.messages.map_or("an unknown number of".to_string(), |n| n.to_string());
@@ -196,5 +219,40 @@ impl EvalReport {
             "groups": groups,
         });
         serde_json::to_string_pretty(&v).context("formatting JSON")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Regression (issue 61): `bag play` played a damaged or truncated bag with exit 0 and "0 skipped"
+    /// while `bag info` said DAMAGED. Both now take their lines from `damage_lines`; play warns them,
+    /// and refuses with --strict.
+    #[test]
+    fn damage_is_said_by_play_as_by_info_and_refused_when_strict() {
+        let bag = Path::new("runs/x/bag");
+        let mut info = BagInfo::default();
+        warn_damage(bag, &info, true).unwrap();
+        info.truncated.push(("runs/x/bag/bag_1.mcap".into(), "no footer".into()));
+        info.lost.push(equiarm_bag::LostChunk {
+            path: "runs/x/bag/bag_0.mcap".into(),
+            offset: Some(4096),
+            start: 2_000_000_000,
+            end: 3_500_000_000,
+            messages: Some(17),
+            reason: "CRC mismatch".into(),
+        });
+        let lines = damage_lines(&info);
+        assert_eq!(lines[0], "bag_1.mcap ends early (no footer)");
+        assert_eq!(
+            lines[1],
+            "bag_0.mcap: the chunk at byte 4096 holding 2.000–3.500 s is damaged (CRC mismatch); 17 messages lost"
+        );
+        let text = info_text(bag, &info);
+        assert!(lines.iter().all(|l| text.contains(&format!("Damage:       {l}"))), "{text}");
+        warn_damage(bag, &info, false).unwrap();
+        let e = warn_damage(bag, &info, true).unwrap_err().to_string();
+        assert!(e.contains("runs/x/bag: the bag is damaged (2 problem(s) above)"), "{e}");
     }
 }
