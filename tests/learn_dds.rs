@@ -674,3 +674,30 @@ fn a_resumed_trainer_records_the_evaluations_due_after_its_checkpoint() {
     let evals = std::fs::read_to_string(run_dir.join("evals.json")).unwrap();
     assert_eq!(updates_of(&evals), vec![2, 4, 6], "{evals}");
 }
+
+/// Regression (issue 61): a Transition whose Observation was refused (a bad frame) waited for ever
+/// for a frame that could not come. Now the ones waiting are dropped when the Observation is
+/// refused, later ones are refused naming it, and both are counted as bad.
+#[test]
+fn transitions_naming_a_refused_observation_are_dropped_and_counted() {
+    let mut ing = ingest();
+    let obs = |seq: u64| observation("env0", 0, seq, seq as u8);
+    // Transition 0 arrives first and waits for Observations 0 and 1; Observation 1 is bad.
+    assert!(ing.transition(transition("env0", 0, 0, false, false)).unwrap().is_none());
+    assert_eq!(ing.waiting(), 1);
+    assert!(ing.observation(&obs(0)).unwrap().is_empty());
+    let mut bad = obs(1);
+    bad.color.truncate(3);
+    assert!(ing.observation(&bad).is_err());
+    assert_eq!(ing.waiting(), 0, "the waiting Transition is dropped with its Observation");
+    // Transition 1 (Observations 1 and 2) comes after: refused, naming the Observation.
+    let e = ing.transition(transition("env0", 0, 1, false, false)).unwrap_err();
+    assert_eq!((e.cause(), e.to_string().as_str()), ("orphan", "it names Observation 1, whose frame was refused"));
+    // The rest of the stream is joined as usual.
+    for s in [2, 3] {
+        assert!(ing.observation(&obs(s)).unwrap().is_empty());
+    }
+    assert!(ing.transition(transition("env0", 0, 2, false, false)).unwrap().is_some());
+    let n = &ing.counts;
+    assert_eq!((n.transitions, n.bad, n.bad_frames, n.unmatched, ing.waiting()), (3, 2, 1, 0, 0));
+}

@@ -29,6 +29,25 @@ mod image;
 pub mod obs_frame;
 
 pub use image::ImageError;
+
+/// Longest peer-supplied string a log line shows whole ([`shown`]).
+pub const SHOWN_CHARS: usize = 64;
+
+/// A string from a message (an env name, a run id) as a log line shows it: whole up to
+/// [`SHOWN_CHARS`] characters, else its start and how long it is, so a peer cannot fill a log with
+/// one megabyte-long field.
+///
+/// ```
+/// assert_eq!(equiarm_msgs::shown("env0"), "env0");
+/// let long = "x".repeat(1 << 20);
+/// assert_eq!(equiarm_msgs::shown(&long), format!("{}… (1048576 bytes)", "x".repeat(64)));
+/// ```
+pub fn shown(s: &str) -> std::borrow::Cow<'_, str> {
+    match s.char_indices().nth(SHOWN_CHARS) {
+        None => s.into(),
+        Some((end, _)) => format!("{}… ({} bytes)", &s[..end], s.len()).into(),
+    }
+}
 pub use obs_frame::ObsFrameError;
 
 use serde::{Serialize, de::DeserializeOwned};

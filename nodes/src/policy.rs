@@ -11,7 +11,7 @@ use std::collections::HashSet;
 
 use equiarm_msgs::msg::{GripperCommand, Observation, PolicyWeights, TrainerStatus};
 use equiarm_train::gate::Gate;
-use equiarm_train::policy::{Policy, WeightsOutcome};
+use equiarm_train::policy::{MAX_LOGGED_SENDERS, Policy, WeightsOutcome};
 use log::{info, warn};
 
 use crate::policy_cli::{PolicyArgs, architecture};
@@ -39,7 +39,7 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
         String::new()
     };
     info!("{}: mode {:?}{arch}, gate {:?}", node.name(), args.mode, gate.rule());
-    let (mut sent, mut bad, mut refused) = (0u64, 0u64, HashSet::new());
+    let (mut sent, mut bad, mut refused, mut logged) = (0u64, 0u64, HashSet::new(), HashSet::new());
     let signal = shutdown_signal();
     tokio::pin!(signal);
     loop {
@@ -52,12 +52,12 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
             r = obs_sub.recv() => gate.offer(r?.0, &policy),
             r = recv_some(weights_sub.as_ref()) => {
                 let (w, _) = r?;
-                let (version, updates, run) = (w.version, w.updates, w.run_id.clone());
+                let (version, updates, run) = (w.version, w.updates, equiarm_msgs::shown(&w.run_id).into_owned());
                 match policy.on_weights(w) {
                     // In lock-step a new version comes every round: log the first and every 100th.
                     WeightsOutcome::Loaded if !args.deterministic || version % 100 == 1 => info!("weights version {version} (updates {updates})"),
                     WeightsOutcome::Loaded | WeightsOutcome::Stale => {}
-                    WeightsOutcome::NewRun { was } => warn!("weights of run '{run}' (version {version}), after run '{was}': following the new run"),
+                    WeightsOutcome::NewRun { was } => warn!("weights of run '{run}' (version {version}), after run '{}': following the new run", equiarm_msgs::shown(&was)),
                     WeightsOutcome::Older { current } => warn!("ignoring weights version {version} of run '{run}': version {current} is in use and versions only grow within a run"),
                     WeightsOutcome::Refused(why) => if refused.insert(why.clone()) { warn!("refusing weights version {version}: {why}") },
                     WeightsOutcome::Failed(why) => warn!("weights version {version} did not load, keeping version {}: {why}", policy.version()),
@@ -66,7 +66,7 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
             }
         };
         if let Some(obs) = ready {
-            answer(&mut policy, obs, &cmd_pub, &mut sent, &mut bad).await;
+            answer(&mut policy, obs, &cmd_pub, &mut sent, (&mut bad, &mut logged)).await;
             if let Some((median, p95)) = policy.latency_report().filter(|_| !args.quiet) {
                 info!("actor latency (batch 1, last 100): median {median:.2} ms, p95 {p95:.2} ms");
             }
@@ -81,13 +81,14 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
     Ok(sent)
 }
 
-/// Answers `obs` and publishes the command; a bad Observation is counted and logged (rate-limited).
+/// Answers `obs` and publishes the command; a bad Observation is counted, and logged once per
+/// sender and cause (`skips`: the count, and the pairs logged, at most `MAX_LOGGED_SENDERS`).
 async fn answer(
     policy: &mut Policy,
     obs: Observation,
     cmd_pub: &Publisher<GripperCommand>,
     sent: &mut u64,
-    bad: &mut u64,
+    skips: (&mut u64, &mut HashSet<(String, &'static str)>),
 ) {
     match policy.answer(&obs) {
         Ok(cmd) => match cmd_pub.publish(cmd).await {
@@ -95,9 +96,14 @@ async fn answer(
             Err(e) => warn!("{e:#}"),
         },
         Err(reason) => {
+            let ((bad, logged), cause) = (skips, reason.cause());
             *bad += 1;
-            if bad.is_power_of_two() {
-                warn!("skipping Observation seq {} of '{}': {reason} ({bad} skipped so far)", obs.seq, obs.env);
+            if logged.len() < MAX_LOGGED_SENDERS && logged.insert((obs.env.clone(), cause)) {
+                let env = equiarm_msgs::shown(&obs.env);
+                warn!(
+                    "skipping Observation seq {} of '{env}': {reason} (further {cause} defects of this env are counted, not logged; {bad} skipped so far)",
+                    obs.seq
+                );
             }
         }
     }

@@ -14,7 +14,7 @@
 //! kept up to [`MAX_FRAMES`] per env, the oldest (lowest seq) dropped first. They cost little: the
 //! replay holds the same frames.
 
-use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::sync::Arc;
 
 use equiarm_msgs::msg::{EpisodeResult, Observation, Transition};
@@ -22,7 +22,7 @@ use equiarm_sac::config::TrainConfig;
 use equiarm_sac::frame::StoredFrame;
 use equiarm_sac::replay::Stored;
 
-use crate::policy::{BadFrame, action_of, frame_of};
+use crate::policy::{BadFrame, action_of, frame_of_size};
 
 /// What the trainer did with the transitions it received (N = stored + held + dropped + eval + bad +
 /// unmatched + [`Ingest::waiting`]).
@@ -73,6 +73,9 @@ pub struct Joined {
 struct EnvFrames {
     frames: BTreeMap<u64, Arc<StoredFrame>>,
     waiting: VecDeque<Transition>,
+    /// Seqs of the Observations refused lately (at most [`MAX_FRAMES`]): the Transitions naming
+    /// them are dropped as bad instead of waiting for a frame that will never come.
+    refused: BTreeSet<u64>,
 }
 
 impl EnvFrames {
@@ -89,6 +92,12 @@ pub const MAX_ABS_REWARD: f32 = 1000.0;
 /// Why a Transition is refused (counted in [`Received::bad`], never stored).
 #[derive(Debug, thiserror::Error)]
 pub enum BadTransition {
+    /// It names an Observation that was refused (its frame was bad), so it can never be joined.
+    #[error("it names Observation {seq}, whose frame was refused")]
+    Orphan {
+        /// The refused Observation's seq.
+        seq: u64,
+    },
     /// Its reward is NaN, infinite or beyond ±[`MAX_ABS_REWARD`].
     #[error("reward {0} is not finite and within ±{MAX_ABS_REWARD}")]
     Reward(f32),
@@ -108,6 +117,7 @@ impl BadTransition {
         match self {
             BadTransition::Reward(_) => "reward",
             BadTransition::Action { .. } => "action",
+            BadTransition::Orphan { .. } => "orphan",
         }
     }
 }
@@ -171,11 +181,21 @@ impl Ingest {
         }
         let env = self.envs.entry(o.env.clone()).or_default();
         if let std::collections::btree_map::Entry::Vacant(slot) = env.frames.entry(o.seq) {
-            let f = frame_of(o).and_then(|f| match f.size() == self.image_size {
-                true => Ok(f),
-                false => Err(BadFrame::Size { got: f.size(), want: self.image_size }),
-            });
-            slot.insert(Arc::new(f.inspect_err(|_| self.counts.bad_frames += 1)?));
+            let f = match frame_of_size(o, self.image_size) {
+                Ok(f) => f,
+                Err(e) => {
+                    self.counts.bad_frames += 1;
+                    env.refused.insert(o.seq);
+                    while env.refused.len() > MAX_FRAMES {
+                        env.refused.pop_first();
+                    }
+                    let before = env.waiting.len();
+                    env.waiting.retain(|t| t.obs_seq != o.seq && t.next_obs_seq != o.seq);
+                    self.counts.bad += (before - env.waiting.len()) as u64;
+                    return Err(e);
+                }
+            };
+            slot.insert(Arc::new(f));
             while env.frames.len() > MAX_FRAMES {
                 env.frames.pop_first();
             }
@@ -205,6 +225,10 @@ impl Ingest {
             return Err(e);
         }
         let env = self.envs.entry(t.env.clone()).or_default();
+        if let Some(&seq) = [t.obs_seq, t.next_obs_seq].iter().find(|s| env.refused.contains(s)) {
+            self.counts.bad += 1;
+            return Err(BadTransition::Orphan { seq });
+        }
         match env.frames_of(&t) {
             Some((obs, next_obs)) => Ok(Some(Joined { t, obs, next_obs })),
             None => {

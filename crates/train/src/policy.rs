@@ -21,7 +21,6 @@ use equiarm_msgs::msg::{GripperCommand, Observation, PolicyWeights};
 use equiarm_sac::agent::{ActMode, Agent, AgentConfig, ModelKind};
 use equiarm_sac::frame::{FrameError, StoredFrame};
 use equiarm_sim::{Action, rng::Rng};
-use log::warn;
 
 use crate::gate::Standing;
 
@@ -47,15 +46,22 @@ pub enum BadFrame {
     /// Not square, too large, or a depth that is not finite.
     #[error(transparent)]
     Frame(#[from] FrameError),
-    /// A frame of another size than the run's (trainer).
-    #[error("frame of {got} px, the run's image_size is {want}")]
+    /// A frame of another size than the reader's (the trainer's `image_size`, the policy's
+    /// `--image`), refused before its planes are decompressed.
+    #[error("frame of {height} x {width} px, {want} x {want} expected")]
     Size {
-        /// The frame's side.
-        got: usize,
-        /// The run's `image_size`.
+        /// The frame's rows, as the Observation states them.
+        height: u32,
+        /// Its columns.
+        width: u32,
+        /// The side the reader takes.
         want: usize,
     },
 }
+
+/// How many (sender, cause) pairs of refused messages a node logs once each; beyond them refusals
+/// are only counted (a peer inventing env names cannot grow the set or the log).
+pub const MAX_LOGGED_SENDERS: usize = 256;
 
 /// Why the policy could not answer an Observation.
 #[derive(Debug, thiserror::Error)]
@@ -66,6 +72,18 @@ pub enum AnswerError {
     /// The actor failed on it.
     #[error("acting: {0}")]
     Act(equiarm_sac::learner::LearnerError),
+}
+
+impl AnswerError {
+    /// The kind of defect, one word, for logging each sender's defects once per kind.
+    pub fn cause(&self) -> &'static str {
+        match self {
+            AnswerError::Frame(BadFrame::Size { .. }) => "frame size",
+            AnswerError::Frame(BadFrame::Planes(_)) => "frame planes",
+            AnswerError::Frame(BadFrame::Frame(_)) => "frame",
+            AnswerError::Act(_) => "acting",
+        }
+    }
 }
 
 // By hand, not `#[from]`: the message shows the cause, so it is not also chained as a source
@@ -79,6 +97,16 @@ impl From<equiarm_sac::learner::LearnerError> for AnswerError {
 /// The physical action a GripperCommand (or a Transition's action) carries.
 pub fn action_of(c: &GripperCommand) -> Action {
     Action::new(c.open_ratio, c.dx, c.dy, c.dz, c.dtheta)
+}
+
+/// The frame of an Observation of `want` × `want` pixels: one of another size is refused from its
+/// stated sides, before anything is decompressed (a 10 kB message can announce 8192 × 8192 pixels,
+/// about 460 MB of planes).
+pub fn frame_of_size(obs: &Observation, want: usize) -> Result<StoredFrame, BadFrame> {
+    if (obs.height as usize, obs.width as usize) != (want, want) {
+        return Err(BadFrame::Size { height: obs.height, width: obs.width, want });
+    }
+    frame_of(obs)
 }
 
 /// The frame of an Observation (rgb8 colour, half-float depth, holding), as the replay stores it;
@@ -223,14 +251,7 @@ impl Policy {
                 ([(); 5].map(|_| self.rng.uniform(-1.0, 1.0)), GripperCommand::SOURCE_RANDOM)
             }
             (mode, Some(agent)) => {
-                let frame = frame_of(obs)?;
-                if frame.size() != self.frame_size && self.actions == 0 {
-                    warn!(
-                        "frames are {} px, the actor was set up for {} px (acting on the centre crop anyway)",
-                        frame.size(),
-                        self.frame_size
-                    );
-                }
+                let frame = frame_of_size(obs, self.frame_size)?;
                 let (act, s) = (
                     if mode == PolicyMode::Greedy { ActMode::Greedy } else { ActMode::Sample },
                     agent.config().input_size,
@@ -314,5 +335,54 @@ impl Policy {
             }
             Err(e) => WeightsOutcome::Failed(e),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ingest::Ingest;
+    use equiarm_sac::config::TrainConfig;
+
+    /// An Observation announcing `side` × `side` pixels whose planes are 16 bytes of garbage: a
+    /// reader that decompressed them would fail on the planes, one that checks the sides first
+    /// fails on the size.
+    fn announcing(side: u32) -> Observation {
+        Observation {
+            env: "env0".into(),
+            height: side,
+            width: side,
+            color: vec![7; 16],
+            depth: vec![7; 16],
+            ..Default::default()
+        }
+    }
+
+    /// Regression (issue 61): a 10 kB Observation announcing 8192 × 8192 pixels was decompressed in
+    /// full (about 460 MB, 2.3 s) by the policy and by the trainer before it was refused, and a frame
+    /// of another size than the policy's was answered on its centre crop without a word.
+    #[test]
+    fn frames_of_another_size_are_refused_from_their_sides_before_decompression() {
+        let arch = AgentConfig {
+            model: equiarm_sac::agent::ModelKind::Cnn,
+            hidden: 8,
+            input_size: 16,
+            ..AgentConfig::default()
+        };
+        let mut policy = Policy::new(PolicyMode::Greedy, arch, 19, None, 1).unwrap();
+        for side in [8192, 38, 16] {
+            let e = policy.answer(&announcing(side)).unwrap_err();
+            assert!(matches!(e, AnswerError::Frame(BadFrame::Size { want: 19, .. })), "{side}: {e}");
+            assert_eq!(e.to_string(), format!("frame of {side} x {side} px, 19 x 19 expected"));
+        }
+        // of the right size, the same garbage is read, and refused for what it is
+        let e = policy.answer(&announcing(19)).unwrap_err();
+        assert!(matches!(e, AnswerError::Frame(BadFrame::Planes(_))), "{e}");
+
+        let cfg = TrainConfig { image_size: 19, ..TrainConfig::reduced(equiarm_types::TaskKind::BlockPulling) };
+        let mut ingest = Ingest::new(&cfg, "/eval");
+        let e = ingest.observation(&announcing(8192)).unwrap_err();
+        assert!(matches!(e, BadFrame::Size { height: 8192, width: 8192, want: 19 }), "{e}");
+        assert_eq!(ingest.counts.bad_frames, 1);
     }
 }

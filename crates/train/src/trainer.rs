@@ -263,8 +263,11 @@ impl Trainer {
     }
 
     /// Logs a refused message once per env and cause.
+    /// (At most [`crate::policy::MAX_LOGGED_SENDERS`] pairs are remembered: a peer inventing env names cannot grow it.)
     fn log_bad(&mut self, env: &str, seq: u64, cause: &'static str, e: &dyn std::fmt::Display) {
-        if self.bad_logged.insert((env.to_string(), cause)) {
+        if self.bad_logged.len() < crate::policy::MAX_LOGGED_SENDERS && self.bad_logged.insert((env.to_string(), cause))
+        {
+            let env = equiarm_msgs::shown(env);
             warn!(
                 "skipping a message of '{env}' (seq {seq}): {e} (further {cause} defects of this env are counted, not logged)"
             );
