@@ -160,8 +160,135 @@ pub fn all() -> Vec<Target> {
             seeds: cli_seeds,
             harness: |_| Ok(Box::new(CliHarness)),
         },
+        Target {
+            name: "bag_metadata",
+            about: "a bag's metadata.yaml beside a small intact bag: Reader::info's check of it (aliases refused unexpanded)",
+            shape: Shape::Text,
+            max_len: 1 << 14,
+            dictionary: &["&a ", "*a", "version: ", "message_count: ", "relative_file_paths:", "- ", "[", "{", "\n  "],
+            seeds: |s| {
+                let dir = small_bag(&s.join("seed").join("bag"))?;
+                // (an alias-using file is no seed: seeds must be accepted; the dictionary brings aliases)
+                Ok(vec![std::fs::read(dir.join("metadata.yaml")).map_err(equiarm_types::files::at(&dir))?])
+            },
+            harness: |s| Ok(Box::new(BagMetadata { dir: small_bag(&s.join("read").join("bag"))? })),
+        },
+        Target {
+            name: "obs_frame",
+            about: "an Observation's stated sides and planes (u16 height, u16 width, u16 split, then bytes): policy::frame_of_size for 19 px",
+            shape: Shape::Binary,
+            max_len: 1 << 12,
+            dictionary: &[],
+            seeds: |_| obs_frame_seeds(),
+            harness: |_| Ok(Box::new(ObsFrame)),
+        },
+        Target {
+            name: "grid_toml",
+            about: "an experiment grid file: equiarm_experiment::grid::Grid::parse, then each run's config",
+            shape: Shape::Text,
+            max_len: 1 << 14,
+            dictionary: &["tasks = ", "variants = ", "views = ", "corruptions = ", "seeds = ", "[updates]", "[config]", "heldout_episodes = "],
+            seeds: |_| Ok(GRIDS.iter().map(|g| g.as_bytes().to_vec()).collect()),
+            harness: |_| Ok(Box::new(GridToml)),
+        },
     ]);
     t
+}
+
+// ---------------------------------------------------------------------------------------------
+// Files and frames from outside (issue 61)
+
+/// A finished bag of 6 commands on one topic in `dir` (made afresh), with its metadata.yaml.
+fn small_bag(dir: &Path) -> Result<PathBuf, SetupError> {
+    use equiarm_bag::{TopicInfo, Writer, WriterOptions};
+    let bag = |e: &dyn std::fmt::Display| SetupError::Project { what: "writing the small bag", message: e.to_string() };
+    let _ = std::fs::remove_dir_all(dir);
+    let mut w = Writer::create(dir, WriterOptions::default()).map_err(|e| bag(&e))?;
+    let qos = [equiarm_bag::qos::OfferedQos::reliable(10)];
+    let id = w
+        .add_topic(TopicInfo::of::<equiarm_msgs::msg::GripperCommand>("/env0/gripper_cmd", &qos))
+        .map_err(|e| bag(&e))?;
+    for k in 0..6u64 {
+        let data = cdr::encode(&command()).map_err(|e| bag(&e))?;
+        w.write(id, 1_700_000_000_000_000_000 + k, 1_700_000_000_000_000_000 + k, &data).map_err(|e| bag(&e))?;
+    }
+    Ok(w.finish().map_err(|e| bag(&e))?.dir)
+}
+
+struct BagMetadata {
+    dir: PathBuf,
+}
+
+impl Harness for BagMetadata {
+    fn run(&mut self, input: &[u8]) -> bool {
+        let path = self.dir.join("metadata.yaml");
+        std::fs::write(&path, input).expect("writing the input file");
+        let reader = equiarm_bag::Reader::open(&self.dir).expect("the small bag opens");
+        let info = reader.info().expect("the small bag reads");
+        info.metadata.is_some_and(|m| m.ok())
+    }
+}
+
+/// The side the `obs_frame` target's reader takes.
+const FRAME_SIDE: usize = 19;
+
+fn obs_frame_seeds() -> Result<Vec<Vec<u8>>, SetupError> {
+    let mut out = Vec::new();
+    // (seeds must be accepted: frames of the side read; the mutations change the sides)
+    let side = FRAME_SIDE as u32;
+    for step in [7, 0] {
+        let n = (side * side) as usize;
+        let mut o = equiarm_msgs::msg::Observation::default();
+        let color: Vec<u8> = (0..n * 3).map(|i| (i * step % 251) as u8).collect();
+        let depth: Vec<f32> = (0..n).map(|i| 0.2 + i as f32 / 1000.0).collect();
+        o.set_frame(side, side, &color, &depth).map_err(|e| SetupError::project("compressing a seed frame")(&e))?;
+        let mut bytes = Vec::new();
+        for v in [side as u16, side as u16, o.color.len() as u16] {
+            bytes.extend(v.to_le_bytes());
+        }
+        bytes.extend(&o.color);
+        bytes.extend(&o.depth);
+        out.push(bytes);
+    }
+    Ok(out)
+}
+
+struct ObsFrame;
+
+impl Harness for ObsFrame {
+    fn run(&mut self, input: &[u8]) -> bool {
+        let Some((head, planes)) = input.split_at_checked(6) else { return false };
+        let n = |i: usize| u16::from_le_bytes([head[i], head[i + 1]]) as usize;
+        let (color, depth) = planes.split_at(n(4).min(planes.len()));
+        let o = equiarm_msgs::msg::Observation {
+            height: n(0) as u32,
+            width: n(2) as u32,
+            color: color.to_vec(),
+            depth: depth.to_vec(),
+            ..Default::default()
+        };
+        equiarm_train::policy::frame_of_size(&o, FRAME_SIDE).is_ok()
+    }
+}
+
+/// The repository's grid files, the seeds of `grid_toml`.
+const GRIDS: &[&str] = &[
+    include_str!("../../experiments/tasks.toml"),
+    include_str!("../../experiments/baselines.toml"),
+    include_str!("../../experiments/view_angle.toml"),
+    include_str!("../../experiments/reflection.toml"),
+    include_str!("../../experiments/bf16_check.toml"),
+];
+
+struct GridToml;
+
+impl Harness for GridToml {
+    fn run(&mut self, input: &[u8]) -> bool {
+        use equiarm_experiment::grid::Grid;
+        let Ok(text) = std::str::from_utf8(input) else { return false };
+        let Ok(grid) = Grid::parse(Path::new("fuzz.toml"), text) else { return false };
+        grid.cells().iter().all(|c| grid.config(c).is_ok())
+    }
 }
 
 /// A target that fails on purpose, for testing the runner (not in [`all`]): its seeds are run
