@@ -509,6 +509,20 @@ fn weights_versions_only_grow_within_a_run_and_a_stray_version_cannot_silence_th
     assert_eq!(policy.version(), 4);
 }
 
+/// In-process trainer options on the CPU for `run_dir` (resuming it with `resume`), eval env `/eval`.
+fn trainer_options(run_dir: &std::path::Path, resume: bool) -> TrainerOptions {
+    TrainerOptions {
+        run_dir: run_dir.to_path_buf(),
+        resume: resume.then(|| run_dir.to_path_buf()),
+        force: false,
+        eval_namespace: "/eval".into(),
+        deterministic: false,
+        device: equiarm_nn::device::open("cpu").unwrap(),
+        weights_every: 0,
+        progress: false,
+    }
+}
+
 /// Regression (CI, 2026-12-03): an expert policy that never hands over (`policy --mode expert`
 /// beside an unthrottled sim) filled the 100,000-slot replay with expert transitions, which are
 /// never overwritten, and the trainer stopped with "replay buffer is full of expert transitions"
@@ -530,17 +544,7 @@ fn a_replay_full_of_expert_transitions_drops_further_rows_and_training_goes_on()
     };
     cfg.replay.capacity = 6;
     (cfg.agent.input_size, cfg.agent.hidden) = (16, 8);
-    let opts = TrainerOptions {
-        run_dir: run_dir.clone(),
-        resume: None,
-        force: false,
-        eval_namespace: "/eval".into(),
-        deterministic: false,
-        device: equiarm_nn::device::open("cpu").unwrap(),
-        weights_every: 0,
-        progress: false,
-    };
-    let (mut trainer, mut learner) = Trainer::open(cfg, opts).unwrap();
+    let (mut trainer, mut learner) = Trainer::open(cfg, trainer_options(&run_dir, false)).unwrap();
     let mut seq = 0;
     for episode in 0..4 {
         for k in 0..3 {
@@ -603,16 +607,7 @@ fn a_resumed_trainer_records_the_evaluations_due_after_its_checkpoint() {
         (c.agent.input_size, c.agent.hidden) = (16, 8);
         c
     };
-    let opts = |resume: bool| TrainerOptions {
-        run_dir: run_dir.clone(),
-        resume: resume.then(|| run_dir.clone()),
-        force: false,
-        eval_namespace: "/eval".into(),
-        deterministic: false,
-        device: equiarm_nn::device::open("cpu").unwrap(),
-        weights_every: 0,
-        progress: false,
-    };
+    let opts = |resume: bool| trainer_options(&run_dir, resume);
     let eval = |episode| EpisodeResult {
         env: "/eval".into(),
         episode,

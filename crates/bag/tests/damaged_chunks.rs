@@ -20,7 +20,13 @@ fn scratch(name: &str) -> PathBuf {
 
 /// A bag of `N` commands (obs_seq = index) in chunks of about 2 KiB; returns its one file.
 fn bag(dir: &Path) -> PathBuf {
-    let opts = WriterOptions { chunk_size: 2 << 10, ..Default::default() };
+    let s = bag_with(dir, WriterOptions { chunk_size: 2 << 10, ..Default::default() });
+    assert_eq!(s.files.len(), 1);
+    s.dir.join(&s.files[0])
+}
+
+/// The bag of `N` commands written with `opts` into `dir/bag`.
+fn bag_with(dir: &Path, opts: WriterOptions) -> equiarm_bag::BagSummary {
     let mut w = Writer::create(&dir.join("bag"), opts).unwrap();
     let id = w
         .add_topic(TopicInfo::of::<GripperCommand>("/env0/gripper_cmd", &[equiarm_bag::qos::OfferedQos::reliable(10)]))
@@ -30,9 +36,7 @@ fn bag(dir: &Path) -> PathBuf {
         let t = T0 + k as u64 * 1_000_000;
         w.write(id, t, t, &cdr::encode(&m).unwrap()).unwrap();
     }
-    let s = w.finish().unwrap();
-    assert_eq!(s.files.len(), 1);
-    s.dir.join(&s.files[0])
+    w.finish().unwrap()
 }
 
 /// The bytes of `file` with chunk `k` damaged (8 bytes flipped in the middle of its compressed
@@ -121,17 +125,7 @@ fn a_damaged_chunk_in_a_file_without_footer_is_skipped_too() {
 #[test]
 fn an_empty_split_file_is_reported_and_the_other_files_are_read() {
     let dir = scratch("empty_split");
-    let opts = WriterOptions { chunk_size: 2 << 10, split_bytes: Some(6 << 10), ..Default::default() };
-    let mut w = Writer::create(&dir.join("bag"), opts).unwrap();
-    let id = w
-        .add_topic(TopicInfo::of::<GripperCommand>("/env0/gripper_cmd", &[equiarm_bag::qos::OfferedQos::reliable(10)]))
-        .unwrap();
-    for k in 0..N {
-        let m = GripperCommand { obs_seq: k as u64, dx: 0.01, ..Default::default() };
-        let t = T0 + k as u64 * 1_000_000;
-        w.write(id, t, t, &cdr::encode(&m).unwrap()).unwrap();
-    }
-    let s = w.finish().unwrap();
+    let s = bag_with(&dir, WriterOptions { chunk_size: 2 << 10, split_bytes: Some(6 << 10), ..Default::default() });
     assert!(s.files.len() >= 3, "{:?}", s.files);
     let emptied = s.dir.join(&s.files[1]);
     let lost = Reader::open(&emptied).unwrap().info().unwrap().messages;
