@@ -198,13 +198,11 @@ impl Reader {
             }
             files.push((p, map));
         }
-        if files.is_empty() || !meta.is_dir() {
-            if let Some(p) = empty.into_iter().next() {
-                return Err(BagError::Empty { path: p });
-            }
-            return Ok(Self { files, empty: Vec::new(), dir: None });
+        // (a single file that is empty leaves no file either)
+        if let (true, Some(p)) = (files.is_empty(), empty.first()) {
+            return Err(BagError::Empty { path: p.clone() });
         }
-        Ok(Self { files, empty, dir: Some(path.to_path_buf()) })
+        Ok(Self { files, empty, dir: meta.is_dir().then(|| path.to_path_buf()) })
     }
 
     /// The files, in read order.
