@@ -11,7 +11,11 @@ if [ ! -f "$_venv/.complete" ]; then
   echo "equiarm: creating the test Python environment in $_venv" >&2
   rm -rf "$_venv"
   python3 -m venv "$_venv"
-  "$_venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$_req"
+  if ! "$_venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$_req"; then
+    echo "equiarm: installing $_req into $_venv failed (above); nothing is kept" >&2
+    rm -rf "$_venv"
+    return 1
+  fi
   touch "$_venv/.complete"
 fi
 export EQUIARM_PYTHON="$_venv/bin/python"

@@ -4,7 +4,12 @@
 //!   `{"global_step": 1000, "wall_time": 12.5, "losses/qf1_loss": 0.03, ...}`, where `wall_time` is
 //!   seconds since the run started (supplied by the caller);
 //! - `metrics.csv`: the same data in long format, header `global_step,wall_time,name,value`, one
-//!   row per scalar (long because evaluation records and loss records carry different names).
+//!   row per scalar (long because evaluation records and loss records carry different names);
+//! - `events.out.tfevents.<unix seconds>.equiarm`: the same scalars as a TensorBoard event file
+//!   (tag = name, step = `global_step`, value as f32, wall time = the Unix time it was written), so
+//!   `tensorboard --logdir RUNS` shows every run under `RUNS` side by side. One event file per run
+//!   directory: a new run removes the old ones, and a resumed run rewrites it from the records it
+//!   keeps (their wall times then read the time of the resume).
 //!
 //! Names are free-form, but the learner uses CleanRL's: `charts/episodic_return`,
 //! `charts/episodic_length`, `charts/SPS`, `losses/qf1_loss`, `losses/qf2_loss`,
@@ -15,14 +20,15 @@
 //! Non-finite values (NaN, ±inf) are written as `null` in JSONL and `nan` in CSV; [`read_series`]
 //! reads `null` back as NaN. Each record is written with one `write` call per file and flushed, so a
 //! crash loses at most the record being written; a final line without its newline (such a torn
-//! record) is ignored by [`read_series`] and dropped by [`MetricsWriter::resume`].
+//! record) is ignored by [`read_series`] and dropped by [`MetricsWriter::resume`]. The event file is
+//! flushed on the same schedule (TensorBoard's reader ignores a torn final event).
 //!
 //! Limitations: no fsync per record (the OS may still lose recent records on power loss); the
 //! writer does not enforce increasing steps; `read_series` reads the whole JSONL file, which is fine
 //! for the thousands of records of a run but not meant for streaming huge logs.
 
 use std::fs::{File, OpenOptions};
-use std::io::{self, Write};
+use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use equiarm_types::files::{FileError, at};
@@ -31,6 +37,8 @@ use equiarm_types::files::{FileError, at};
 pub const JSONL_FILE: &str = "metrics.jsonl";
 /// File name of the long-format CSV log inside a run directory.
 pub const CSV_FILE: &str = "metrics.csv";
+/// File names of TensorBoard event files start with this (TensorBoard looks for `tfevents`).
+pub const EVENTS_PREFIX: &str = "events.out.tfevents.";
 /// Header line of [`CSV_FILE`].
 pub const CSV_HEADER: &str = "global_step,wall_time,name,value";
 
@@ -66,13 +74,59 @@ pub enum MetricsError {
     },
 }
 
-/// Appends scalar records to `metrics.jsonl` and `metrics.csv` in a run directory.
-#[derive(Debug)]
+/// Appends scalar records to `metrics.jsonl`, `metrics.csv` and the TensorBoard event file in a run
+/// directory.
 pub struct MetricsWriter {
     dir: PathBuf,
     jsonl: File,
     csv: File,
+    events: Events,
     last: Option<(u64, f64)>,
+}
+
+impl std::fmt::Debug for MetricsWriter {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MetricsWriter").field("dir", &self.dir).field("events", &self.events.path).finish()
+    }
+}
+
+/// The run's TensorBoard event file.
+struct Events {
+    path: PathBuf,
+    writer: syntaxdot_summary::SummaryWriter<BufWriter<File>>,
+}
+
+impl Events {
+    /// Removes the event files in `dir` and starts one holding `records` (flushed after each
+    /// scalar). It is written under a temporary name and renamed once complete, so an interrupted
+    /// start leaves the old files or the new one.
+    fn start(dir: &Path, records: &[(u64, Vec<(String, f64)>)]) -> Result<Self, MetricsError> {
+        let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
+        let path = dir.join(format!("{EVENTS_PREFIX}{secs}.equiarm"));
+        let partial = dir.join(".events.partial");
+        let file = File::create(&partial).map_err(at(&partial))?;
+        let mut writer = syntaxdot_summary::SummaryWriter::new(BufWriter::new(file)).map_err(at(&partial))?;
+        for (step, scalars) in records {
+            for (name, value) in scalars {
+                writer.write_scalar(name.as_str(), *step as i64, *value as f32).map_err(at(&partial))?;
+            }
+        }
+        for old in std::fs::read_dir(dir).map_err(at(dir))? {
+            let old = old.map_err(at(dir))?.path();
+            if old.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with(EVENTS_PREFIX)) {
+                std::fs::remove_file(&old).map_err(at(&old))?;
+            }
+        }
+        std::fs::rename(&partial, &path).map_err(at(&path))?;
+        Ok(Self { path, writer })
+    }
+
+    fn log(&mut self, step: u64, scalars: &[(&str, f64)]) -> Result<(), MetricsError> {
+        for (name, value) in scalars {
+            self.writer.write_scalar(*name, step as i64, *value as f32).map_err(at(&self.path))?;
+        }
+        Ok(())
+    }
 }
 
 impl MetricsWriter {
@@ -85,13 +139,14 @@ impl MetricsWriter {
         let jsonl = File::create(&jsonl_path).map_err(at(&jsonl_path))?;
         let mut csv = File::create(&csv_path).map_err(at(&csv_path))?;
         csv.write_all(format!("{CSV_HEADER}\n").as_bytes()).and_then(|_| csv.flush()).map_err(at(&csv_path))?;
-        Ok(Self { dir: dir.to_path_buf(), jsonl, csv, last: None })
+        let events = Events::start(dir, &[])?;
+        Ok(Self { dir: dir.to_path_buf(), jsonl, csv, events, last: None })
     }
 
     /// Continues the logs in `dir` after a restart from the checkpoint taken at `up_to_step`: keeps
     /// only the records with `global_step <= up_to_step` (so steps logged after that checkpoint are
     /// not duplicated), rewrites both files atomically (temporary file, then rename) and appends to
-    /// them. Missing files are started fresh. A torn final line (no newline) is dropped; any other
+    /// them; the event file is rewritten from the kept records. Missing files are started fresh. A torn final line (no newline) is dropped; any other
     /// malformed line is an error naming the file and line.
     pub fn resume(dir: &Path, up_to_step: u64) -> Result<Self, MetricsError> {
         std::fs::create_dir_all(dir).map_err(at(dir))?;
@@ -100,13 +155,16 @@ impl MetricsWriter {
 
         let mut last: Option<(u64, f64)> = None;
         let mut kept_json = String::new();
+        let mut kept_events = Vec::new();
         if let Some(text) = read_optional(&jsonl_path)? {
             for (line_no, line) in complete_lines(&text) {
                 if line.trim().is_empty() {
                     continue;
                 }
-                let (step, wall) = parse_json_record(&jsonl_path, line_no, line)?.keys;
+                let record = parse_json_record(&jsonl_path, line_no, line)?;
+                let (step, wall) = record.keys;
                 if step <= up_to_step {
+                    kept_events.push((step, record.scalars(&jsonl_path, line_no)?));
                     kept_json.push_str(line);
                     kept_json.push('\n');
                     if last.is_none_or(|(s, _)| step >= s) {
@@ -145,8 +203,9 @@ impl MetricsWriter {
         }
         equiarm_types::files::replace(&jsonl_path, &kept_json)?;
         equiarm_types::files::replace(&csv_path, &kept_csv)?;
+        let events = Events::start(dir, &kept_events)?;
         let open = |p: &Path| OpenOptions::new().append(true).open(p).map_err(at(p));
-        Ok(Self { dir: dir.to_path_buf(), jsonl: open(&jsonl_path)?, csv: open(&csv_path)?, last })
+        Ok(Self { dir: dir.to_path_buf(), jsonl: open(&jsonl_path)?, csv: open(&csv_path)?, events, last })
     }
 
     /// The run directory.
@@ -190,6 +249,7 @@ impl MetricsWriter {
         if !csv.is_empty() {
             self.csv.write_all(csv.as_bytes()).and_then(|_| self.csv.flush()).map_err(at(&csv_path))?;
         }
+        self.events.log(global_step, scalars)?;
         self.last = Some((global_step, if wall_time.is_finite() { wall_time } else { f64::NAN }));
         Ok(())
     }
@@ -254,6 +314,29 @@ fn parse_json_record(path: &Path, line_no: usize, line: &str) -> Result<JsonReco
     Ok(JsonRecord { keys: (step, wall), object })
 }
 
+impl JsonRecord {
+    /// The record's scalars (every key but the two record keys); `null` reads as NaN.
+    fn scalars(&self, path: &Path, line_no: usize) -> Result<Vec<(String, f64)>, MetricsError> {
+        let mut out = Vec::new();
+        for (name, value) in self.object.iter().filter(|(k, _)| *k != "global_step" && *k != "wall_time") {
+            out.push((name.clone(), json_value(path, line_no, name, value)?));
+        }
+        Ok(out)
+    }
+}
+
+/// A scalar of a JSONL record: a number, or `null` for NaN.
+fn json_value(path: &Path, line_no: usize, name: &str, value: &serde_json::Value) -> Result<f64, MetricsError> {
+    match value {
+        serde_json::Value::Null => Ok(f64::NAN),
+        v => v.as_f64().ok_or_else(|| MetricsError::Malformed {
+            path: path.to_path_buf(),
+            line: line_no,
+            reason: format!("{name:?} is not a number"),
+        }),
+    }
+}
+
 /// The `(global_step, value)` pairs of scalar `name` in `dir/metrics.jsonl`, in file order; records
 /// without `name` are skipped and a `null` value reads as NaN. A torn final line (no newline, e.g.
 /// while the run is writing it) is ignored; any other malformed line is an error naming the file
@@ -267,15 +350,8 @@ pub fn read_series(dir: &Path, name: &str) -> Result<Vec<(u64, f64)>, MetricsErr
             continue;
         }
         let rec = parse_json_record(&path, line_no, line)?;
-        let value = match rec.object.get(name) {
-            None => continue,
-            Some(serde_json::Value::Null) => f64::NAN,
-            Some(v) => v.as_f64().ok_or_else(|| MetricsError::Malformed {
-                path: path.clone(),
-                line: line_no,
-                reason: format!("{name:?} is not a number"),
-            })?,
-        };
+        let Some(value) = rec.object.get(name) else { continue };
+        let value = json_value(&path, line_no, name, value)?;
         out.push((rec.keys.0, value));
     }
     Ok(out)
@@ -393,5 +469,38 @@ mod tests {
         assert!(matches!(w.log(1, 0.0, &[("a", 1.0), ("a", 2.0)]), Err(MetricsError::DuplicateName { .. })));
         let missing = read_series(&dir.join("nothing_here"), "a").unwrap_err();
         assert!(missing.to_string().contains("nothing_here"), "{missing}");
+    }
+
+    /// The run directory's event files (their names).
+    fn event_files(dir: &Path) -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains("tfevents") || n.contains("events."))
+            .collect();
+        names.sort();
+        names
+    }
+
+    #[test]
+    fn one_event_file_per_run_directory_growing_with_each_record() {
+        let dir_tmp = tempfile::tempdir().unwrap();
+        let dir = dir_tmp.path();
+        std::fs::write(dir.join("events.out.tfevents.1.old"), b"old").unwrap();
+        let mut w = MetricsWriter::create(dir).unwrap();
+        let files = event_files(dir);
+        assert_eq!(files.len(), 1, "{files:?}");
+        assert!(files[0].starts_with(EVENTS_PREFIX) && files[0] != "events.out.tfevents.1.old", "{files:?}");
+        let size = |w: &MetricsWriter| std::fs::metadata(&w.events.path).unwrap().len();
+        let empty = size(&w);
+        w.log(1, 0.0, &[("a", 1.0), ("b", 2.0)]).unwrap();
+        let one = size(&w);
+        assert!(one > empty, "flushed with the record");
+        w.log(2, 0.0, &[("a", 3.0)]).unwrap();
+        drop(w);
+        // Resumed at step 1: the event file is rewritten with the kept record (two scalars) only.
+        let w = MetricsWriter::resume(dir, 1).unwrap();
+        assert_eq!(event_files(dir).len(), 1, "{:?}", event_files(dir));
+        assert_eq!(size(&w), one);
     }
 }
