@@ -66,6 +66,31 @@ pub enum BagCommand {
         #[arg(long)]
         strict: bool,
     },
+    /// Writes the bag's steps in a format other tools read: `lerobot`, a LeRobotDataset v3.0
+    /// directory (one row per step: colour and depth, holding, the normalised action, reward, done,
+    /// success, task and where the action came from; docs/nodes.md, "Exports").
+    Export {
+        /// Bag directory or .mcap file.
+        bag: PathBuf,
+        /// The format.
+        #[arg(long, value_enum)]
+        format: ExportFormat,
+        /// The new directory (refused if it exists and is not empty).
+        out: PathBuf,
+    },
+    /// Writes one MP4 per episode: colour beside depth, a caption with the step, reward and action
+    /// source, one frame per step plus the last, at the simulated rate (docs/nodes.md, "Exports").
+    Video {
+        /// Bag directory or .mcap file.
+        bag: PathBuf,
+        /// The directory for the videos (created), named ENV_epNNNN.mp4.
+        #[arg(long)]
+        out: PathBuf,
+        /// Only these episodes: a comma-separated list of ENV:EPISODE, ENV (all of it) and eval
+        /// (every evaluation episode), e.g. `env0:3,eval`.
+        #[arg(long, value_parser = equiarm_export::video::Selection::parse)]
+        episodes: Option<equiarm_export::video::Selection>,
+    },
     /// Rewrites a bag whose recorder was killed as a complete, indexed bag.
     Recover {
         /// The damaged bag directory or .mcap file.
@@ -73,6 +98,13 @@ pub enum BagCommand {
         /// The new bag directory.
         output: PathBuf,
     },
+}
+
+/// What `equiarm bag export` writes.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum ExportFormat {
+    /// A LeRobotDataset v3.0 directory (Parquet), for LeRobot's `LeRobotDataset(repo_id, root=OUT)`.
+    Lerobot,
 }
 
 /// Runs `equiarm bag`.
@@ -115,6 +147,39 @@ pub fn run(c: BagCommand) -> anyhow::Result<ExitCode> {
             let opts = RosOptions::from_env()?;
             let (published, skipped) = super::runtime()?.block_on(equiarm_nodes::player::run(&opts, cfg))?;
             println!("published {published} messages ({skipped} skipped)");
+        }
+        BagCommand::Export { bag, format: ExportFormat::Lerobot, out } => {
+            let r = equiarm_export::lerobot::export(&bag, &out)?;
+            for d in &r.steps.damage {
+                log::warn!("{}: {d} (skipped)", bag.display());
+            }
+            let s = &r.steps;
+            println!(
+                "{}: {} episodes ({} cut short), {} frames of {}x{} px at {} fps, {} task(s) → {}",
+                bag.display(),
+                r.episodes,
+                s.episodes.1,
+                r.frames,
+                r.size.0,
+                r.size.1,
+                r.fps,
+                r.tasks.len(),
+                out.display()
+            );
+            println!(
+                "transitions joined {}, unmatched {}, duplicate observations {}, undecodable messages {}",
+                s.joined, s.unmatched, s.duplicates, s.undecodable
+            );
+        }
+        BagCommand::Video { bag, out, episodes } => {
+            let r = equiarm_export::video::bag_videos(&bag, &out, &episodes.unwrap_or_default())?;
+            for d in &r.steps.damage {
+                log::warn!("{}: {d} (skipped)", bag.display());
+            }
+            for (p, frames) in &r.files {
+                println!("{} ({frames} frames)", p.display());
+            }
+            println!("{} video(s) in {}", r.files.len(), out.display());
         }
         BagCommand::Recover { input, output } => {
             let r = equiarm_bag::recover(&input, &output, equiarm_bag::WriterOptions::default())?;

@@ -311,6 +311,25 @@ fn ensure_font() -> Result<(), PlotError> {
     if ok { Ok(()) } else { Err(PlotError::Draw("the embedded DejaVu Sans font could not be loaded".into())) }
 }
 
+/// Writes `text` in white on black, `size` px high, into the `width` × `height` rgb8 image `buf` (a
+/// caption strip), left-aligned with a small margin.
+pub fn caption(buf: &mut [u8], width: u32, height: u32, text: &str, size: u32) -> Result<(), PlotError> {
+    ensure_font()?;
+    let root = BitMapBackend::with_buffer(buf, (width, height)).into_drawing_area();
+    root.fill(&BLACK).map_err(draw_err)?;
+    let margin = (size / 3).max(1) as i32;
+    root.draw_text(text, &(FONT, size).into_font().color(&WHITE), (margin, (height as i32 - size as i32) / 2))
+        .map_err(draw_err)?;
+    root.present().map_err(draw_err)
+}
+
+/// The viridis colour of `t` in [0, 1] (clamped), as rgb8: a perceptually even map for depth images.
+pub fn viridis(t: f64) -> [u8; 3] {
+    use plotters::style::colors::colormaps::{ColorMap, ViridisRGB};
+    let c: RGBColor = ViridisRGB.get_color(t.clamp(0.0, 1.0) as f32);
+    [c.0, c.1, c.2]
+}
+
 fn rgb(c: [u8; 3]) -> RGBColor {
     RGBColor(c[0], c[1], c[2])
 }
