@@ -15,6 +15,7 @@
 #   --model M          equi, cnn, sen or ferm (default: the config's)
 #   --out DIR          output directory; the bag is DIR/bag, logs in DIR/logs (default runs/eval-<task>-<time>)
 #   --timeout-s T      give up after T seconds (default 1800)
+#   --video            also write one MP4 per episode into DIR/videos (`equiarm bag video`)
 # Environment: EQUIARM_BIN (the binary; when unset it is built once with cargo into CARGO_TARGET_DIR,
 # default ~/.cache/equiarm/target), ROS_DOMAIN_ID (passed on to every process).
 #
@@ -28,7 +29,7 @@ here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 source "$here/lib.sh"
 eqa_default_signals "$0" "$@"
 
-checkpoint="" task=block_pulling episodes=20 seed=1000 preset=reduced16 config="" model="" out="" timeout_s=1800
+checkpoint="" task=block_pulling episodes=20 seed=1000 preset=reduced16 config="" model="" out="" timeout_s=1800 video=0
 usage() { sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; }
 while [ $# -gt 0 ]; do
   case $1 in
@@ -41,6 +42,7 @@ while [ $# -gt 0 ]; do
     --model) model=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
     --timeout-s) timeout_s=$2; shift 2 ;;
+    --video) video=1; shift ;;
     -h|--help) usage; exit 0 ;;
     *) echo "eval.sh: unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
@@ -72,4 +74,7 @@ eqa_wait_sims "$timeout_s" "$out/logs" sim_eval || failed=1
 sleep 2  # the last EpisodeResult reaches the recorder
 eqa_stop_all
 "$EQUIARM_BIN" bag eval "$bag" || failed=1
+if [ "$video" = 1 ]; then
+  "$EQUIARM_BIN" bag video "$bag" --out "$out/videos" || failed=1
+fi
 exit $failed

@@ -91,6 +91,10 @@ pub struct TrainArgs {
     /// checkpoint (for slow configs, whose checkpoint_every updates take long).
     #[arg(long, value_parser = crate::cli_values::positive_minutes)]
     pub checkpoint_minutes: Option<f64>,
+    /// In-process: film every Nth evaluation, one MP4 per episode in RUN_DIR/videos/update_NNNNNNN/
+    /// (colour beside depth, a caption with step, reward and outcome; as `equiarm bag video`).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub video_every: Option<u64>,
     /// Transitions in the replay before the first update.
     #[arg(long)]
     pub training_starts: Option<usize>,
@@ -213,6 +217,7 @@ pub fn run_in_process(args: &TrainArgs, cfg: TrainConfig) -> anyhow::Result<RunS
         device: args.device.clone(),
         force: args.force,
         checkpoint_secs: args.checkpoint_minutes.map(|m| m * 60.0),
+        video_every: args.video_every,
     };
     Ok(equiarm_train::inprocess::run(cfg, &opts, &move || stop.load(std::sync::atomic::Ordering::Relaxed))?)
 }

@@ -416,6 +416,30 @@ def test_demo_sh_records_expert_episodes_and_leaves_nothing_running(tmp_path):
     assert not _leftovers(str(out)), _leftovers(str(out))
 
 
+@needs_bin
+def test_eval_sh_video_writes_one_mp4_per_episode(tmp_path):
+    """eval.sh --video on a committed checkpoint: the bag's episodes as videos that PyAV decodes, one
+    frame per step plus the last, at the simulated rate (6 fps for the default physics)."""
+    av = pytest.importorskip("av")
+    run = ROOT / "crates" / "train" / "tests" / "fixtures" / "run_before_types"
+    out = tmp_path / "eval"
+    env = dict(os.environ, EQUIARM_BIN=BIN, ROS_DOMAIN_ID=str(random.randint(120, 200)))
+    r = subprocess.run(["bash", str(SCRIPTS / "eval.sh"), "--checkpoint", str(run / "checkpoints" / "latest"),
+                        "--config", str(run / "config.json"), "--episodes", "2", "--out", str(out), "--video"],
+                       env=env, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    s = json.loads(subprocess.run([sys.executable, str(SCRIPTS / "read_bag.py"), str(out / "bag"), "--json"],
+                                  capture_output=True, text=True, timeout=120, check=True).stdout)
+    videos = sorted((out / "videos").iterdir())
+    assert [v.name for v in videos] == [f"eval_ep{e['episode']:04}.mp4" for e in sorted(s["episodes"], key=lambda e: e["episode"])]
+    for v, e in zip(videos, sorted(s["episodes"], key=lambda e: e["episode"])):
+        with av.open(str(v)) as c:
+            stream = c.streams.video[0]
+            assert sum(1 for _ in c.decode(stream)) == e["steps"] + 1, v
+            assert stream.average_rate == 6
+    assert not _leftovers(str(out)), _leftovers(str(out))
+
+
 def test_eval_sh_refuses_without_a_checkpoint(tmp_path):
     r = subprocess.run(["bash", str(SCRIPTS / "eval.sh"), "--task", "block_pulling"], capture_output=True,
                        text=True, timeout=30, env=dict(os.environ, EQUIARM_BIN="/bin/true"))

@@ -5,6 +5,7 @@ colour panel equal to the Observation's colours within the codec's error (stated
     EQUIARM_BIN=target/debug/equiarm python -m pytest tests/python/test_video.py
 """
 
+import json
 import os
 import subprocess
 
@@ -85,3 +86,24 @@ def test_selecting_episodes(videos, tmp_path):
     assert sorted(p.name for p in (tmp_path / "some").iterdir()) == ["env0_ep0001.mp4"]
     r = video(bag, tmp_path / "bad", "--episodes", "env0:x")
     assert r.returncode == 2 and "whole number" in r.stderr, r.stderr
+
+
+def test_in_process_training_films_every_nth_evaluation(tmp_path):
+    run = tmp_path / "run"
+    r = subprocess.run([BIN, "train", "--in-process", "--image", "19:16", "--hidden", "8", "--batch-size", "8",
+                        "--num-envs", "1", "--demo-episodes", "0", "--training-starts", "8", "--eval-every", "5",
+                        "--eval-episodes", "2", "--checkpoint-every", "0", "-q", "--total-updates", "10",
+                        "--video-every", "2", "--run-dir", str(run)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    # evaluations at updates 5 and 10: the second is filmed
+    assert sorted(p.name for p in (run / "videos").iterdir()) == ["update_0000010"]
+    files = sorted((run / "videos" / "update_0000010").iterdir())
+    assert [f.name for f in files] == ["episode_00.mp4", "episode_01.mp4"]
+    last = json.loads((run / "evals.json").read_text())[-1]
+    counts = []
+    for f in files:
+        fr, s = frames(f)
+        assert s.average_rate == 6  # the default physics: a step of 20 / 120 s
+        counts.append(len(fr))
+    # one frame per step plus the last of each episode
+    assert sum(counts) == round(last["mean_length"] * 2) + 2, (counts, last)

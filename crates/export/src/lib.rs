@@ -47,6 +47,9 @@ pub enum ExportError {
         /// What is wrong.
         reason: String,
     },
+    /// Writing a video failed.
+    #[error(transparent)]
+    Video(#[from] equiarm_train::video::VideoError),
     /// Encoding a frame or a Parquet file failed.
     #[error("{}: {reason}", path.display())]
     Encode {

@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::TrainError;
 use crate::env::{EVAL, episode_seed, frame_of};
+use crate::video::Frame;
 
 /// Result of one greedy evaluation.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -93,6 +94,35 @@ pub fn evaluate_on(
     episodes: usize,
     stream: Stream,
 ) -> Result<EvalResult, TrainError> {
+    Ok(evaluate_inner(learner, envs, episodes, stream, false)?.0)
+}
+
+/// [`evaluate`], keeping every episode's frames for a video: each Observation with a caption (step,
+/// the reward of the step taken from it), and the last with the outcome.
+pub fn evaluate_filmed(
+    learner: &mut Learner,
+    envs: &mut [Env],
+    episodes: usize,
+) -> Result<(EvalResult, Vec<Vec<Frame>>), TrainError> {
+    evaluate_inner(learner, envs, episodes, Stream::Training, true)
+}
+
+fn shot(o: &equiarm_sim::Observation, k: usize, caption: String) -> Frame {
+    Frame {
+        color: o.color.clone(),
+        depth: o.depth.clone(),
+        caption: format!("eval ep {k}  step {}  {caption}", o.step),
+    }
+}
+
+fn evaluate_inner(
+    learner: &mut Learner,
+    envs: &mut [Env],
+    episodes: usize,
+    stream: Stream,
+    film: bool,
+) -> Result<(EvalResult, Vec<Vec<Frame>>), TrainError> {
+    let mut films: Vec<Vec<Frame>> = Vec::new();
     let cfg = learner.config().clone();
     let stream_index = match stream {
         Stream::Training => 0,
@@ -107,6 +137,9 @@ pub fn evaluate_on(
         for (i, env) in envs.iter_mut().take(n).enumerate() {
             let o = env.reset(episode_seed(cfg.seed ^ EVAL, stream_index, (next + i) as u64))?;
             obs.push(Some(frame_of(&o)?));
+            if film {
+                films.push(vec![shot(&o, next + i, String::new())]);
+            }
         }
         let mut steps = vec![0u32; n];
         let mut ep_ret = vec![0.0f64; n];
@@ -117,6 +150,19 @@ pub fn evaluate_on(
             let actions = learner.act(&frames, ActMode::Greedy)?;
             for (&i, a) in live.iter().zip(actions) {
                 let r = envs[i].step(&Action::from_normalized(a))?;
+                if let Some(f) = films.get_mut(next + i).and_then(|f| f.last_mut()) {
+                    f.caption.push_str(&format!("reward {}", r.reward));
+                }
+                if film {
+                    let end = if !r.done {
+                        String::new()
+                    } else if r.info.success {
+                        "success".into()
+                    } else {
+                        "failure".into()
+                    };
+                    films[next + i].push(shot(&r.observation, next + i, end));
+                }
                 ep_ret[i] += r.reward as f64;
                 ep_disc[i] += gamma.powi(steps[i] as i32) * r.reward as f64;
                 steps[i] += 1;
@@ -135,5 +181,5 @@ pub fn evaluate_on(
         }
         next += n;
     }
-    Ok(EvalResult::from_episodes(learner.updates(), &ended))
+    Ok((EvalResult::from_episodes(learner.updates(), &ended), films))
 }

@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::TrainError;
 use crate::env::{collect_demos, env_config, episode_seed, frame_of, terminal};
-use crate::evaluation::{EvalResult, evaluate};
+use crate::evaluation::{EvalResult, evaluate, evaluate_filmed};
 use crate::record::{RunRecord, RunSummary};
 use equiarm_types::NormalizedAction;
 
@@ -88,6 +88,8 @@ pub struct RunOptions {
     /// (besides the config's `checkpoint_every` updates), so that a slow run loses little when it
     /// is killed. `None`: by update count only.
     pub checkpoint_secs: Option<f64>,
+    /// Film every this many-th evaluation: one MP4 per episode in `RUN_DIR/videos/update_NNNNNNN/`.
+    pub video_every: Option<u64>,
 }
 
 impl Default for RunOptions {
@@ -101,8 +103,33 @@ impl Default for RunOptions {
             device: equiarm_nn::device::cpu(),
             force: false,
             checkpoint_secs: None,
+            video_every: None,
         }
     }
+}
+
+/// An evaluation, filmed into `run_dir/videos/update_NNNNNNN/episode_NN.mp4` when `film`.
+fn evaluation(
+    learner: &mut Learner,
+    envs: &mut [Env],
+    episodes: usize,
+    film: bool,
+    run_dir: &Path,
+) -> Result<EvalResult, TrainError> {
+    if !film {
+        return evaluate(learner, envs, episodes);
+    }
+    let (e, films) = evaluate_filmed(learner, envs, episodes)?;
+    let dir = run_dir.join("videos").join(format!("update_{:07}", learner.updates()));
+    std::fs::create_dir_all(&dir).map_err(equiarm_types::files::at(&dir))?;
+    let env = envs[0].config();
+    let fps = (1e9 / crate::stepper::SimClock::new(env).step_ns.max(1) as f64).round().max(1.0) as u32;
+    let size = (env.camera.height as u32, env.camera.width as u32);
+    for (k, frames) in films.iter().enumerate() {
+        crate::video::write(&dir.join(format!("episode_{k:02}.mp4")), frames, size, fps)?;
+    }
+    log::info!("{} evaluation video(s) in {}", films.len(), dir.display());
+    Ok(e)
 }
 
 /// Run (or resume) a training run. `stop` is polled between steps (Ctrl-C): when it turns true
@@ -213,7 +240,8 @@ pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Resu
         let sps = (global_step - sps_start.1) as f64 / sps_start.0.elapsed().as_secs_f64().max(1e-9);
         record.update(global_step, wall(&started), u, &m, sps)?;
         if cfg.eval_every > 0 && u % cfg.eval_every == 0 {
-            let e = evaluate(&mut learner, &mut eval_envs, cfg.eval_episodes)?;
+            let film = opts.video_every.is_some_and(|n| (u / cfg.eval_every).is_multiple_of(n));
+            let e = evaluation(&mut learner, &mut eval_envs, cfg.eval_episodes, film, &opts.run_dir)?;
             record.evaluation(global_step, wall(&started), e)?;
         }
         let by_count = cfg.checkpoint_every > 0 && u % cfg.checkpoint_every == 0;
@@ -235,7 +263,7 @@ pub fn run(cfg: TrainConfig, opts: &RunOptions, stop: &dyn Fn() -> bool) -> Resu
     }
     let u = learner.updates();
     if u >= total && cfg.eval_every > 0 && record.evals().last().map(|e| e.updates) != Some(u) {
-        let e = evaluate(&mut learner, &mut eval_envs, cfg.eval_episodes)?;
+        let e = evaluation(&mut learner, &mut eval_envs, cfg.eval_episodes, opts.video_every.is_some(), &opts.run_dir)?;
         record.evaluation(global_step, wall(&started), e)?;
     }
     record.finish(&learner, STATE_FILE, &state(&slots, global_step, &record, wall(&started)))?;

@@ -49,6 +49,7 @@ pub mod record;
 pub mod rundir;
 pub mod stepper;
 pub mod trainer;
+pub mod video;
 
 /// Errors of a training run.
 #[derive(Debug, Error)]
@@ -94,6 +95,9 @@ pub enum TrainError {
     /// The learning curve could not be drawn.
     #[error(transparent)]
     Plot(#[from] plot::PlotError),
+    /// Writing an evaluation video failed.
+    #[error(transparent)]
+    Video(#[from] video::VideoError),
     /// The expert did not produce enough successful demos.
     #[error("the expert succeeded in {got} of {tried} demo episodes; {want} needed")]
     Demos {
