@@ -257,3 +257,36 @@ fn stale_and_non_finite_commands_are_ignored_and_the_observation_is_republished(
         "{stderr}"
     );
 }
+
+#[test]
+fn a_camera_subscriber_that_matches_late_still_gets_the_first_frame_once() {
+    const DOMAIN: u16 = 92;
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let sim = rt.block_on(async {
+        let mut n = node(DOMAIN, "sim_test_late_camera");
+        let obs_sub = n.subscription::<Observation>("/st92/observation", qos::command()).unwrap();
+        let cmd_pub = n.publisher::<GripperCommand>("/st92/gripper_cmd", qos::command()).unwrap();
+        let sim = Sim::spawn(DOMAIN, "/st92", &["--seed", "3", "--timeout-ms", "300"]);
+        let first = next(&obs_sub, Duration::from_secs(20)).await.expect("no Observation within 20 s");
+        assert_eq!(first.seq, 0);
+        // Only now, long after the sim published frame 0, does a camera subscriber appear.
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        let color = n.subscription::<Image>("/st92/camera/color/image_raw", qos::sensor_data()).unwrap();
+        let info = n.subscription::<CameraInfo>("/st92/camera/camera_info", qos::sensor_data()).unwrap();
+        let img = next(&color, Duration::from_secs(5)).await.expect("the late subscriber never got frame 0");
+        assert_eq!(img.header.stamp, first.header.stamp);
+        let ci = next(&info, Duration::from_secs(5)).await.expect("no camera_info for frame 0");
+        assert_eq!(ci.header.stamp, first.header.stamp);
+        // Once sent, frame 0 is not sent again while the sim still waits for its command.
+        assert!(next(&color, Duration::from_millis(800)).await.is_none(), "frame 0 came twice");
+        assert!(n.wait_for_subscription(&cmd_pub, Duration::from_secs(5)).await, "sim never subscribed");
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        cmd_pub.publish(expert_reply(&first)).await.unwrap();
+        let img = next(&color, Duration::from_secs(5)).await.expect("no frame after the first step");
+        assert!(img.header.stamp.as_nanos() > first.header.stamp.as_nanos(), "{:?}", img.header.stamp);
+        sim
+    });
+    sim.signal("INT");
+    let out = sim.wait(Duration::from_secs(20));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}

@@ -8,6 +8,7 @@
 #[cfg(not(any(feature = "jazzy", feature = "humble")))]
 compile_error!("equiarm_nodes needs a ROS 2 distro feature: `jazzy` (the default) or `humble`");
 
+pub mod camera;
 pub mod cli_values;
 pub mod echo;
 pub mod endpoints;

@@ -5,7 +5,8 @@
 //! - publishes an `Observation` (seq, env, episode, step, rgb8 colour, 32FC1 depth in metres, holding,
 //!   the expert's action with `source = EXPERT` and `obs_seq = seq`) on `observation` (relative to the
 //!   namespace; reliable keep-last 10) and the same frame on `camera/color/image_raw`,
-//!   `camera/depth/image_raw` and `camera/camera_info` (best effort; one header stamp for all), and
+//!   `camera/depth/image_raw` and `camera/camera_info` (best effort; one header stamp for all; a
+//!   subscriber that matched after the frame went out gets it while the sim waits: [`crate::camera`]), and
 //!   the gripper's pose on `/tf` (`world` → `<env>/gripper`, reliable keep-last 100) at that stamp
 //!   (again with a re-publication);
 //!   once at start, the camera's pose on `/tf_static` (`world` → `camera_optical_frame`, latched);
@@ -38,15 +39,12 @@ use equiarm_msgs::builtin_interfaces::Time;
 use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, Transition};
 use equiarm_msgs::rosgraph_msgs::Clock;
 use equiarm_msgs::tf2_msgs::TFMessage;
-use equiarm_msgs::{
-    sensor_msgs::{CameraInfo, Image},
-    std_msgs::Header,
-};
-use equiarm_sim::{CameraConfig, Env, EnvConfig};
-use equiarm_train::stepper::{CAMERA_FRAME, SimStats, Step, Stepper, tf_gripper, tf_static};
+use equiarm_sim::{CameraConfig, EnvConfig};
+use equiarm_train::stepper::{SimStats, Step, Stepper, tf_gripper, tf_static};
 use equiarm_types::{Corruption, TaskKind, ViewPreset};
 use log::{debug, info};
 
+use crate::camera::{CATCH_UP_POLL, CameraPublishers};
 use crate::ros::{Publisher, RosNode, RosOptions, qos, shutdown_signal};
 
 /// Options of `equiarm sim` (the command line parses straight into this).
@@ -157,7 +155,7 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
         }
         Ok(())
     };
-    let camera = CameraPublishers::new(&mut node, sim.env())?;
+    let mut camera = CameraPublishers::new(&mut node, sim.env())?;
     // the frames: the camera's once (latched), the gripper's with each observation
     let tf_static_pub = node.publisher::<TFMessage>("/tf_static", qos::latched())?;
     tf_static_pub.publish(tf_static(sim.env())).await?;
@@ -176,11 +174,19 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
                 let deadline = tokio::time::Instant::now() + timeout;
                 let got = loop {
                     let left = deadline.saturating_duration_since(tokio::time::Instant::now());
+                    // a camera subscriber that matched late still gets the frame waiting for its command
+                    let wait = if camera.pending() { left.min(CATCH_UP_POLL) } else { left };
                     let r = tokio::select! {
                         s = &mut signal => { info!("{}: {} received, shutting down", node.name(), s?); break 'episodes; }
-                        r = cmd_sub.recv_timeout(left) => r?,
+                        r = cmd_sub.recv_timeout(wait) => r?,
                     };
-                    let Some((cmd, _)) = r else { break None };
+                    let Some((cmd, _)) = r else {
+                        if tokio::time::Instant::now() < deadline {
+                            camera.catch_up(&node, &obs).await?;
+                            continue;
+                        }
+                        break None;
+                    };
                     if let Some(step) = sim.command(cmd)? {
                         break Some(step);
                     }
@@ -229,48 +235,6 @@ async fn publish_tf(tf: &Publisher<TFMessage>, sim: &Stepper, env: &str, obs: &O
     match tf_gripper(sim.env(), env, obs.header.stamp.clone()) {
         Some(m) => tf.publish(m).await,
         None => Ok(()),
-    }
-}
-
-/// The camera topics. Images are decoded from the Observation only while someone subscribes.
-struct CameraPublishers {
-    color: Publisher<Image>,
-    depth: Publisher<Image>,
-    info: Publisher<CameraInfo>,
-    camera_info: CameraInfo,
-}
-
-impl CameraPublishers {
-    fn new(node: &mut RosNode, env: &Env) -> anyhow::Result<Self> {
-        let ci = env.camera().camera_info();
-        let camera_info = CameraInfo {
-            height: ci.height,
-            width: ci.width,
-            distortion_model: ci.distortion_model.to_string(),
-            d: ci.d.to_vec(),
-            k: ci.k,
-            r: ci.r,
-            p: ci.p,
-            ..Default::default()
-        };
-        Ok(Self {
-            color: node.publisher("camera/color/image_raw", qos::sensor_data())?,
-            depth: node.publisher("camera/depth/image_raw", qos::sensor_data())?,
-            info: node.publisher("camera/camera_info", qos::sensor_data())?,
-            camera_info,
-        })
-    }
-
-    /// Publishes the frame of `obs` (its stamp, the camera's frame id; depth at the Observation's precision).
-    async fn publish(&self, node: &RosNode, obs: &Observation) -> anyhow::Result<()> {
-        let header = Header::new(obs.header.stamp.clone(), CAMERA_FRAME);
-        if self.color.subscription_count(node) > 0 {
-            self.color.publish(obs.color_image(header.clone())?).await?;
-        }
-        if self.depth.subscription_count(node) > 0 {
-            self.depth.publish(obs.depth_image(header.clone())?).await?;
-        }
-        self.info.publish(CameraInfo { header, ..self.camera_info.clone() }).await
     }
 }
 
