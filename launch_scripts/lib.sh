@@ -177,8 +177,9 @@ eqa_recorded_run() {
   # Observations by seq, so a bag without them is not self-contained) by name, so they are subscribed
   # from the start (`--all` looks for new topics every 100 ms and can miss the start of a short first
   # episode); the rest through --all.
+  # EQA_RECORD_FLAGS: more recorder flags (train.sh --foxglove).
   eqa_start recorder "$1/logs/record.log" "$EQUIARM_BIN" record --all -q -o "$EQA_BAG" \
-    /episodes:equiarm_msgs/msg/EpisodeResult /transitions:equiarm_msgs/msg/Transition "${@:2}"
+    ${EQA_RECORD_FLAGS[@]+"${EQA_RECORD_FLAGS[@]}"} /episodes:equiarm_msgs/msg/EpisodeResult /transitions:equiarm_msgs/msg/Transition "${@:2}"
   sleep 1
 }
 

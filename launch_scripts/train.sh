@@ -22,6 +22,8 @@
 #   --run-dir DIR       where everything goes (default runs/<task>-<date>)
 #   --total-updates U   override the config's number of updates
 #   --no-record         do not record a bag
+#   --foxglove [H:]PORT the recorder also serves the run to Foxglove over WebSocket (PORT on loopback,
+#                       or H:PORT): open ws://127.0.0.1:PORT in Foxglove, no ROS install needed
 #   --force             a --run-dir that holds a run (metrics, checkpoints) is moved aside to
 #                       RUN_DIR.old-N first (without it such a directory is refused)
 #   --deterministic     lock-step rounds: the trainer and the training policies get --deterministic
@@ -53,10 +55,11 @@ while [ $# -gt 0 ]; do
     --run-dir) run_dir=$2; shift 2 ;;
     --total-updates) total_updates=$2; shift 2 ;;
     --no-record) record=0; shift ;;
+    --foxglove) EQA_RECORD_FLAGS=(--foxglove "$2"); shift 2 ;;
     --force) force=1; shift ;;
     --deterministic) det=1; shift ;;
     --) shift; extra=("$@"); break ;;
-    -h|--help) sed -n '2,36p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,38p' "$0"; exit 0 ;;
     *) echo "train.sh: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
 done

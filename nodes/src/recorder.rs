@@ -4,6 +4,9 @@
 //! the bag, flushes it on a timer (so a kill loses at most the flush interval) and prints a one-line
 //! status.
 //!
+//! With `foxglove` set it also serves every recorded message to Foxglove over WebSocket
+//! ([`crate::live`]).
+//!
 //! Every second it counts each recorded topic's publishers, and says when a topic that had some has
 //! none left (a publisher ended, or DDS lost it: a stalled machine can let a participant's lease
 //! expire) and when one is back, and lists at the end the topics that lost theirs, so a bag with a
@@ -26,7 +29,9 @@ use equiarm_msgs::{RosMessage, TypeInfo, cdr};
 use log::{info, warn};
 use tokio::sync::mpsc;
 
+use crate::live::Live;
 use crate::ros::{RosNode, RosOptions, qos, shutdown_signal};
+use crate::topic_watch::Watch;
 
 /// What to record and how.
 #[derive(Clone, Debug)]
@@ -46,6 +51,8 @@ pub struct RecordConfig {
     pub status_every: Option<Duration>,
     /// Stop after this long (None: until SIGINT/SIGTERM).
     pub duration: Option<Duration>,
+    /// Serve what is recorded to Foxglove over WebSocket on this address ([`crate::live`]).
+    pub foxglove: Option<std::net::SocketAddr>,
 }
 
 /// One received message on its way to the writer.
@@ -70,35 +77,6 @@ fn qos_for(type_name: &str) -> (ros2_client::qos::QosProfile, OfferedQos) {
     }
 }
 
-/// A recorded topic's publisher count, as discovery sees it.
-struct Watch {
-    name: String,
-    count: Box<dyn Fn(&RosNode) -> usize + Send>,
-    /// Publishers were seen at some point.
-    had: bool,
-    /// None are left now (and a warning said so).
-    lost: bool,
-}
-
-impl Watch {
-    /// Compares the publisher count with the last one and logs a loss or a return.
-    fn check(&mut self, node: &RosNode) {
-        let n = (self.count)(node);
-        if n > 0 {
-            if self.lost {
-                info!("{}: a publisher is back ({n} now); recording it again", self.name);
-            }
-            (self.had, self.lost) = (true, false);
-        } else if self.had && !self.lost {
-            self.lost = true;
-            warn!(
-                "{}: every publisher is gone (it ended, or DDS lost it); the bag has nothing of this topic until one is back",
-                self.name
-            );
-        }
-    }
-}
-
 async fn forward<M: RosMessage>(
     sub: Arc<crate::ros::Subscriber<M>>,
     topic: TopicId,
@@ -118,7 +96,7 @@ async fn forward<M: RosMessage>(
 /// Subscribes to `name` as the type `type_name` and spawns its forwarding task.
 fn subscribe(
     node: &mut RosNode,
-    writer: &mut Writer,
+    (writer, live): (&mut Writer, &mut Option<Live>),
     name: &str,
     type_name: &str,
     tx: &mpsc::Sender<Sample>,
@@ -127,7 +105,11 @@ fn subscribe(
 ) -> anyhow::Result<()> {
     let (profile, offered) = qos_for(type_name);
     crate::with_message_type!(type_name, M => {
-        let topic = writer.add_topic(TopicInfo::of::<M>(name, &[offered]))?;
+        let info = TopicInfo::of::<M>(name, &[offered]);
+        let topic = writer.add_topic(info.clone())?;
+        if let Some(l) = live.as_mut() {
+            l.add(topic, &info)?;
+        }
         let sub = Arc::new(node.subscription::<M>(name, profile)?);
         let counted = sub.clone();
         watches.push(Watch {
@@ -181,10 +163,14 @@ pub async fn run(opts: &RosOptions, cfg: RecordConfig) -> anyhow::Result<equiarm
         .with_context(|| format!("creating bag {}", cfg.output.display()))?;
     let mut node = RosNode::new("/", "equiarm_recorder", opts)?;
     let (tx, mut rx) = mpsc::channel::<Sample>(4096);
+    let mut live = match cfg.foxglove {
+        Some(addr) => Some(Live::start(addr).await?),
+        None => None,
+    };
     let mut recording: HashSet<String> = HashSet::new();
     let (mut tasks, mut watches) = (Vec::new(), Vec::new());
     for (name, type_name) in &cfg.topics {
-        subscribe(&mut node, &mut writer, name, type_name, &tx, &mut tasks, &mut watches)?;
+        subscribe(&mut node, (&mut writer, &mut live), name, type_name, &tx, &mut tasks, &mut watches)?;
         recording.insert(name.clone());
     }
     let signal = shutdown_signal();
@@ -203,6 +189,9 @@ pub async fn run(opts: &RosOptions, cfg: RecordConfig) -> anyhow::Result<equiarm
             }
             Some(sample) = rx.recv() => {
                 writer.write(sample.topic, sample.log_time, sample.publish_time, &sample.data)?;
+                if let Some(l) = &live {
+                    l.log(sample.topic, sample.log_time, &sample.data);
+                }
                 messages += 1;
                 bytes += sample.data.len() as u64;
                 writer.flush_if_due(start.elapsed().as_nanos() as u64)?;
@@ -217,7 +206,7 @@ pub async fn run(opts: &RosOptions, cfg: RecordConfig) -> anyhow::Result<equiarm
                     for t in node.discovered_topics() {
                         if let Some((name, type_name)) = ros_topic(&t.name, &t.type_name)
                             && recording.insert(name.clone()) {
-                                subscribe(&mut node, &mut writer, &name, type_name, &tx, &mut tasks, &mut watches)?;
+                                subscribe(&mut node, (&mut writer, &mut live), &name, type_name, &tx, &mut tasks, &mut watches)?;
                             }
                     }
                 }

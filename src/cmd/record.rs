@@ -38,6 +38,10 @@ pub struct RecordArgs {
     /// No live status line.
     #[arg(long, short)]
     quiet: bool,
+    /// Also serve what is recorded to Foxglove (its WebSocket protocol; no ROS install needed) on
+    /// PORT on loopback, or on HOST:PORT (e.g. 0.0.0.0:8765 for every interface).
+    #[arg(long, value_name = "[HOST:]PORT", value_parser = equiarm_nodes::live::address)]
+    foxglove: Option<std::net::SocketAddr>,
 }
 
 /// Chunk compression of the bag.
@@ -78,6 +82,7 @@ pub fn run(a: RecordArgs) -> anyhow::Result<ExitCode> {
         output: a.output,
         topics,
         all: a.all,
+        foxglove: a.foxglove,
         polling_interval: Duration::from_millis(a.polling_interval_ms.max(1)),
         writer,
         status_every: (!a.quiet).then(|| Duration::from_secs(1)),
