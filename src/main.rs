@@ -39,12 +39,12 @@ enum Command {
     Sim(cmd::sim::SimCommand),
     /// Records topics into a rosbag2-compatible MCAP bag until Ctrl-C (the recorder node).
     #[command(
-        after_help = "Examples:\n  equiarm record -o runs/today --all\n  equiarm record -o runs/cmds /env0/gripper_cmd:equiarm_msgs/msg/GripperCommand --compression lz4"
+        after_help = "Examples:\n  equiarm record -o runs/today --all\n  equiarm record -o runs/cmds /env0/gripper_cmd:equiarm_msgs/msg/GripperCommand --compression lz4\n  equiarm record -o runs/live --all --foxglove 8765"
     )]
     Record(cmd::record::RecordArgs),
     /// Bags: describe, evaluate, repair.
     #[command(
-        after_help = "Examples:\n  equiarm bag info runs/today\n  equiarm bag eval runs/today --json\n  equiarm bag play runs/today --rate 2 --remap /env0/observation:/replay/observation\n  equiarm bag recover runs/killed runs/recovered"
+        after_help = "Examples:\n  equiarm bag info runs/today\n  equiarm bag eval runs/today --json\n  equiarm bag play runs/today --rate 2 --remap /env0/observation:/replay/observation\n  equiarm bag recover runs/killed runs/recovered\n  equiarm bag export runs/today --format lerobot runs/today-lerobot\n  equiarm bag video runs/today --out runs/today-videos --episodes env0:3,eval"
     )]
     #[command(subcommand)]
     Bag(cmd::bag::BagCommand),
@@ -54,7 +54,7 @@ enum Command {
     /// Writes metrics.csv/jsonl (CleanRL names), learning_curve.png, checkpoints/ and config.json into
     /// --run-dir; prints an evaluation table at the end. Ctrl-C stops with a checkpoint; --resume continues.
     #[command(
-        after_help = "Examples:\n  equiarm train --in-process --task block_pulling --model equi --seed 0 --run-dir runs/pull_s0\n  equiarm train --resume runs/pull_s0\n  equiarm train --task block_pulling --num-envs 5 --run-dir runs/dds_s0\n  equiarm train --print-config --preset paper --task block_in_bowl"
+        after_help = "Examples:\n  equiarm train --in-process --task block_pulling --model equi --seed 0 --run-dir runs/pull_s0\n  equiarm train --resume runs/pull_s0\n  equiarm train --in-process --eval-every 500 --video-every 2 --run-dir runs/filmed\n  equiarm train --task block_pulling --num-envs 5 --run-dir runs/dds_s0\n  equiarm train --print-config --preset paper --task block_in_bowl"
     )]
     Train(Box<equiarm_nodes::train_cli::TrainArgs>),
     /// Policy node: answers each Observation on `observation` (relative to --namespace) with a

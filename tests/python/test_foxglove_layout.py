@@ -12,9 +12,9 @@ LAYOUT = ROOT / "launch_scripts" / "foxglove" / "equiarm_layout.json"
 
 # topic (namespace stripped) -> (message type's .msg file, the node source that publishes it)
 PUBLISHED = {
-    "camera/color/image_raw": ("msgs/ros_std/sensor_msgs/msg/Image.msg", "nodes/src/sim.rs"),
-    "camera/depth/image_raw": ("msgs/ros_std/sensor_msgs/msg/Image.msg", "nodes/src/sim.rs"),
-    "camera/camera_info": ("msgs/ros_std/sensor_msgs/msg/CameraInfo.msg", "nodes/src/sim.rs"),
+    "camera/color/image_raw": ("msgs/ros_std/sensor_msgs/msg/Image.msg", "nodes/src/camera.rs"),
+    "camera/depth/image_raw": ("msgs/ros_std/sensor_msgs/msg/Image.msg", "nodes/src/camera.rs"),
+    "camera/camera_info": ("msgs/ros_std/sensor_msgs/msg/CameraInfo.msg", "nodes/src/camera.rs"),
     "/episodes": ("msgs/msg/EpisodeResult.msg", "nodes/src/sim.rs"),
     "/trainer/status": ("msgs/msg/TrainerStatus.msg", "nodes/src/trainer.rs"),
 }
