@@ -19,14 +19,8 @@ while [ $# -gt 0 ]; do
     *) echo "export.sh: unknown option $1" >&2; exit 2 ;;
   esac
 done
-source launch_scripts/lib.sh
-"${EQA_BUILD[@]}" >&2
-export EQUIARM_BIN="$CARGO_TARGET_DIR/debug/equiarm"
-work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
-source tests/netns.sh
-"${ns[@]}" bash -c "$netup; ROS_DOMAIN_ID=39 bash launch_scripts/demo.sh --num-envs $num_envs --episodes $episodes --resolution $resolution --out $work/demo" > "$work/demo.log" 2>&1 \
-  || { cat "$work/demo.log" >&2; exit 1; }
+source bench/demo_bag.sh
+bench_demo_bag 39 --num-envs "$num_envs" --episodes "$episodes" --resolution "$resolution"
 ms() { local s; s=$(date +%s%N); "$@" > /dev/null 2>&1; echo $(( ($(date +%s%N) - s) / 1000000 )); }
 export_ms=() video_ms=()
 for r in $(seq "$rounds"); do

@@ -27,14 +27,8 @@ if [ ! -f "$venv/.complete" ]; then
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps lerobot==0.4.4
   touch "$venv/.complete"
 fi
-source launch_scripts/lib.sh
-"${EQA_BUILD[@]}" >&2
-export EQUIARM_BIN="$CARGO_TARGET_DIR/debug/equiarm"
-work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
-source tests/netns.sh
-"${ns[@]}" bash -c "$netup; ROS_DOMAIN_ID=38 bash launch_scripts/demo.sh --task $task --num-envs $num_envs --episodes $episodes --out $work/demo" > "$work/demo.log" 2>&1 \
-  || { cat "$work/demo.log" >&2; exit 1; }
+source bench/demo_bag.sh
+bench_demo_bag 38 --task "$task" --num-envs "$num_envs" --episodes "$episodes"
 "$venv/bin/python" launch_scripts/bag_transitions.py "$work/demo/bag" --npz "$work/t.npz" > /dev/null
 start=$(date +%s%N)
 "$EQUIARM_BIN" bag export "$work/demo/bag" --format lerobot "$work/lerobot" >&2
