@@ -111,6 +111,11 @@ pub fn episodes(
             Err(DecodeError::Cdr { .. }) => report.undecodable += 1,
             Ok(()) => {}
         }
+        // checked on Transitions and results only (Observations are most messages): an episode
+        // completed by a late Observation goes out with the next one, or at the end
+        if m.type_name == Observation::TYPE_NAME {
+            return Ok(());
+        }
         hand_over(&mut envs, &mut results, &mut report, false, &mut out)
     })??;
     // the Transitions still waiting name frames the bag does not hold
