@@ -55,7 +55,7 @@ for ((k = 0; k < num_envs; k++)); do
     "$EQUIARM_BIN" policy --namespace "/env$k" --mode expert --seed $((seed + k))
   eqa_start "sim_env$k" "$out/logs/sim_env$k.log" \
     "$EQUIARM_BIN" sim --namespace "/env$k" --task "$task" --seed $((seed + k)) --resolution "$resolution" \
-    --episodes "$episodes"
+    --episodes "$episodes" --stamp-origin "$EQA_STAMP_ORIGIN"
   sims+=("sim_env$k")
 done
 

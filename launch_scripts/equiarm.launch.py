@@ -26,13 +26,15 @@ then gets with `--config` instead of `--preset`.
 Arguments: task, preset (reduced | reduced16 | paper), num_envs, seed, run_dir, total_updates (empty: the
 preset's), model (empty: the config's), config (empty: the preset's file), deterministic (true: the
 lock-step mode of `train.sh --deterministic`), equiarm (path of the
-binary; default `equiarm` on PATH). ROS_DOMAIN_ID and the other ROS variables of the environment
+binary; default `equiarm` on PATH), stamp_origin (`--stamp-origin` of every sim: `launch`, the
+default, is the launch's start time in whole seconds, one value for all, as train.sh gives). ROS_DOMAIN_ID and the other ROS variables of the environment
 apply to every process. Needs the `launch` package only (launch_ros is not used: no ROS package
 executables are involved); nothing is built here.
 """
 
 import json
 import os
+import time
 
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, ExecuteProcess, OpaqueFunction, Shutdown
@@ -53,6 +55,8 @@ ARGUMENTS = [
     ("config", "", "a training config JSON instead of the preset (sizes are read from it)"),
     ("deterministic", "false", "true: lock-step rounds (train.sh --deterministic)"),
     ("equiarm", "equiarm", "path of the equiarm binary"),
+    ("stamp_origin", "launch", "where the sims' stamps start: launch (the launch's start, the same for every sim, "
+     "as train.sh), now (each sim's start), zero, or seconds since 1970"),
 ]
 
 
@@ -102,7 +106,7 @@ def commands(args):
     def pair(ns, env_seed, mode, extra):
         name = ns.strip("/")
         sim = [exe, "sim", "--namespace", ns, "--task", task, "--seed", str(env_seed), "--resolution", str(frame),
-               "--view", view, "--corrupt", corrupt]
+               "--view", view, "--corrupt", corrupt, "--stamp-origin", args.get("stamp_origin", "zero")]
         if ns == EVAL_NAMESPACE:
             sim.append("--eval")  # its EpisodeResults are marked as evaluation episodes
         if ns == "/env0":
@@ -120,6 +124,8 @@ def commands(args):
 
 def launch_setup(context, *_args, **_kwargs):
     args = {name: LaunchConfiguration(name).perform(context) for name, _, _ in ARGUMENTS}
+    if args["stamp_origin"] == "launch":  # read once, so every sim's clock starts at the same time
+        args["stamp_origin"] = str(int(time.time()))
     actions = []
     for name, cmd in commands(args):
         extra = {}

@@ -66,7 +66,7 @@ eqa_start policy_eval "$out/logs/policy_eval.log" \
   --model "$model" --hidden "$hidden" --image "$frame:$input" --seed "$seed"
 eqa_start sim_eval "$out/logs/sim_eval.log" \
   "$EQUIARM_BIN" sim --namespace /eval --eval --task "$task" --seed "$seed" --resolution "$frame" "${scene[@]}" \
-  --episodes "$episodes"
+  --episodes "$episodes" --stamp-origin "$EQA_STAMP_ORIGIN"
 
 eqa_log "evaluating $checkpoint ($model, hidden $hidden, image $frame:$input) on $task: $episodes episode(s), seed $seed"
 failed=0

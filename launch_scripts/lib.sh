@@ -32,6 +32,10 @@ eqa_log() { printf '[%s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
 # The build the launch scripts and the test command share (tests/run_all.sh builds the same): the dev
 # profile (dependencies and the hot crates optimised) of every program, as the GPU build (the CPU
 # stays the default device; docs/backends.md), so whichever runs first builds for both.
+# Where every sim a script starts begins its stamps' clock (`equiarm sim --stamp-origin`): the
+# script's start in whole seconds since 1970, one value for all its sims, so viewers show the run's
+# date and the envs' stamps line up; EQA_STAMP_ORIGIN=zero gives stamps from 0 (the same bytes every run).
+EQA_STAMP_ORIGIN=${EQA_STAMP_ORIGIN:-$(date +%s)}
 EQA_FEATURES=(--features vulkan)
 EQA_BUILD=(cargo build --locked --workspace --bins "${EQA_FEATURES[@]}")
 
@@ -236,7 +240,7 @@ eqa_suite_sim() {
   [ "$i" -eq 0 ] && clock=(--clock)
   mapfile -t scene < <(eqa_scene_args "$run_dir/config.json")
   eqa_start "$name" "$run_dir/logs/$name.log" "$EQUIARM_BIN" sim --namespace "/env$i" --task "$task" \
-    --seed $((seed * 1000 + i)) --resolution "$image" "${scene[@]}" "${clock[@]}"
+    --seed $((seed * 1000 + i)) --resolution "$image" "${scene[@]}" "${clock[@]}" --stamp-origin "$EQA_STAMP_ORIGIN"
 }
 
 # eqa_suite_sims: the training sims and the eval sim.
@@ -245,7 +249,7 @@ eqa_suite_sims() {
   for i in $(seq 0 $((num_envs - 1))); do eqa_suite_sim "$i"; done
   mapfile -t scene < <(eqa_scene_args "$run_dir/config.json")
   eqa_start sim_eval "$run_dir/logs/sim_eval.log" "$EQUIARM_BIN" sim --namespace /eval --eval --task "$task" \
-    --seed $((seed * 1000 + 999)) --resolution "$image" "${scene[@]}"
+    --seed $((seed * 1000 + 999)) --resolution "$image" "${scene[@]}" --stamp-origin "$EQA_STAMP_ORIGIN"
 }
 
 # eqa_config_get FILE KEY: a number or string value of KEY in a config JSON (as written by

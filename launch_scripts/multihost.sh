@@ -194,7 +194,7 @@ for ns in eqa-actor1 eqa-actor2; do
   start_in "policy_env$k" "$ns" "$EQUIARM_BIN" policy --namespace "/env$k" --mode sample --model "$model" \
     --hidden "$hidden" --image "$image" --seed "$k" --expert-episodes "$per_env" --max-lead 10
   start_in "sim_env$k" "$ns" "$EQUIARM_BIN" sim --namespace "/env$k" --task "$task" --seed "$k" --resolution "$frame" \
-    "${scene[@]}"
+    "${scene[@]}" --stamp-origin "$EQA_STAMP_ORIGIN"
   k=$((k + 1))
 done
 eqa_log "running: trainer in eqa-trainer, /env0 in eqa-actor1, /env1 in eqa-actor2 (${seconds}s max; logs in $out/logs)"

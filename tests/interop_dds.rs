@@ -191,6 +191,7 @@ fn sim_clock_and_tf_reach_cyclonedds_with_the_observation_stamps() {
     const DOMAIN: u16 = 76;
     let mut sim = std::process::Command::new(env!("CARGO_BIN_EXE_equiarm"))
         .args(["sim", "--clock", "--task", "block_pulling", "--namespace", "/clk", "--seed", "3"])
+        .args(["--stamp-origin", "1796000000.5"])
         .args(["--resolution", "38", "--episodes", "1"])
         .env("ROS_DOMAIN_ID", DOMAIN.to_string())
         .env("RUST_LOG", "warn,rustdds=off,ros2_client=off")
@@ -225,7 +226,8 @@ fn sim_clock_and_tf_reach_cyclonedds_with_the_observation_stamps() {
         ..Default::default()
     })
     .unwrap();
-    let want = &equiarm_train::stepper::tf_static(&env).transforms[0];
+    let origin = 1_796_000_000_500_000_000_i64;
+    let want = &equiarm_train::stepper::tf_static(&env, Default::default()).transforms[0];
     let (v, q) = (&want.transform.translation, &want.transform.rotation);
     let camera: Vec<_> = lines.iter().filter(|l| l["event"] == "tf_static").collect();
     assert_eq!(camera.len(), 1, "one camera transform on /tf_static: {lines:?}");
@@ -235,6 +237,9 @@ fn sim_clock_and_tf_reach_cyclonedds_with_the_observation_stamps() {
     );
     assert_eq!(camera[0]["translation"], serde_json::json!([v.x, v.y, v.z]));
     assert_eq!(camera[0]["rotation"], serde_json::json!([q.x, q.y, q.z, q.w]));
+    // --stamp-origin: the camera and the first observation at the origin, the clock on from there.
+    assert_eq!(nanos(camera[0]), origin, "/tf_static is stamped at the clock's start");
+    assert_eq!(obs.iter().min(), Some(&origin), "the first observation is stamped at the origin");
     // /tf: the gripper at each observation's stamp (and the terminal one's), above the table.
     let gripper: Vec<_> = lines.iter().filter(|l| l["event"] == "tf").collect();
     assert!(gripper.iter().all(|l| l["parent"] == "world" && l["child"] == "clk/gripper"), "{gripper:?}");

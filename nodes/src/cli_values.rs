@@ -182,3 +182,38 @@ impl std::str::FromStr for ImageSizes {
 pub fn corruption_help() -> String {
     format!("Symmetry corruptions (docs/paper.md §5): {}", equiarm_types::Corruption::help())
 }
+
+/// An env's namespace, `/NAME`: one level (the env's name in messages is NAME), NAME of ASCII letters,
+/// digits and `_`, not starting with a digit, as ROS 2 names are. `NAME` and `/NAME/` are taken as
+/// `/NAME`. Used by every flag that names an env, so the trainer accepts only what a sim accepts.
+pub fn env_namespace(s: &str) -> Result<String, String> {
+    let name = s.strip_prefix('/').unwrap_or(s);
+    let name = name.strip_suffix('/').unwrap_or(name);
+    let ok = name.chars().next().is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+    match ok {
+        true => Ok(format!("/{name}")),
+        false => Err(format!(
+            "'{}' is not an env namespace: one level like /env0 (letters, digits and _, not starting with a digit)",
+            equiarm_msgs::shown(s)
+        )),
+    }
+}
+
+#[cfg(test)]
+mod namespace_tests {
+    use super::env_namespace;
+
+    /// Regression (issue 61): the trainer took an `--eval-namespace` the sim refuses, and then waited
+    /// for an env that could never exist. Every env flag now parses with the sim's rule.
+    #[test]
+    fn env_namespaces_are_one_ros_level() {
+        for (given, want) in [("/env0", "/env0"), ("eval", "/eval"), ("/eval/", "/eval"), ("/_x1", "/_x1")] {
+            assert_eq!(env_namespace(given).as_deref(), Ok(want));
+        }
+        for bad in ["", "/", "/a/b", "/0env", "/env 0", "/env-0", "//env0", "/é"] {
+            let e = env_namespace(bad).unwrap_err();
+            assert!(e.contains("not an env namespace"), "{bad}: {e}");
+        }
+    }
+}

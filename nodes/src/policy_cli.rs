@@ -14,7 +14,7 @@ use equiarm_train::policy::PolicyMode;
 #[derive(Clone, Debug, clap::Args)]
 pub struct PolicyArgs {
     /// Namespace of the node and its relative topics (the env's namespace).
-    #[arg(long, default_value = "/env0")]
+    #[arg(long, default_value = "/env0", value_parser = crate::cli_values::env_namespace)]
     pub namespace: String,
     /// How to act.
     #[arg(long, value_enum, default_value = "sample")]

@@ -21,7 +21,8 @@
 //! `seq` counts the observations this env made, from 0; nothing answers a terminal one.
 //!
 //! Stamps come from a simulated clock: one tick of [`equiarm_train::stepper::SimClock::step_ns`] (the physics time of one env
-//! step, `dt * substeps`) per observation made, from 0; wall time is never read. With `--clock` the
+//! step, `dt * substeps`) per observation made, from `--stamp-origin` (0 by default; `now` reads the
+//! wall clock once, at start, and never again). With `--clock` the
 //! node also publishes that time on `/clock` (`rosgraph_msgs/msg/Clock`, reliable keep-last 10, which
 //! matches rclpy's and rclcpp's best-effort clock subscriptions too) just before each publication of
 //! an observation (again with a re-publication, so the clock never decreases), so ROS tools with `use_sim_time` line up with the stamps. One sim per graph should do it:
@@ -34,15 +35,15 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use anyhow::{Context as _, bail};
+use anyhow::Context as _;
 use equiarm_msgs::builtin_interfaces::Time;
 use equiarm_msgs::msg::{EpisodeResult, GripperCommand, Observation, Transition};
 use equiarm_msgs::rosgraph_msgs::Clock;
 use equiarm_msgs::tf2_msgs::TFMessage;
 use equiarm_sim::{CameraConfig, EnvConfig};
-use equiarm_train::stepper::{SimStats, Step, Stepper, tf_gripper, tf_static};
+use equiarm_train::stepper::{SimStats, StampOrigin, Step, Stepper, tf_gripper, tf_static};
 use equiarm_types::{Corruption, TaskKind, ViewPreset};
-use log::{debug, info};
+use log::{debug, info, warn};
 
 use crate::camera::{CATCH_UP_POLL, CameraPublishers};
 use crate::ros::{Publisher, RosNode, RosOptions, qos, shutdown_signal};
@@ -58,7 +59,7 @@ pub struct SimArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Namespace of the node and its relative topics; the env name is the namespace without '/'.
-    #[arg(long, default_value = "/env0")]
+    #[arg(long, default_value = "/env0", value_parser = crate::cli_values::env_namespace)]
     pub namespace: String,
     /// Camera preset: side (the paper's default view), angle15 … angle90 (the view-angle sweep).
     #[arg(long, value_enum)]
@@ -96,6 +97,11 @@ pub struct SimArgs {
     /// each Observation, for nodes with use_sim_time. Give it to one sim per graph (train.sh: /env0).
     #[arg(long)]
     pub clock: bool,
+    /// Where the stamps' clock starts: zero (1970 in a viewer; the same bytes every run), now (the wall
+    /// clock at start) or seconds since 1970 (train.sh gives a run's sims its launch time). Stamps then
+    /// advance by simulated time.
+    #[arg(long, default_value = "zero", value_name = "zero|now|UNIX_SECONDS")]
+    pub stamp_origin: StampOrigin,
 }
 
 /// The EnvConfig the arguments describe: the config file (or defaults), then the flags.
@@ -130,17 +136,21 @@ pub fn env_config(args: &SimArgs) -> anyhow::Result<EnvConfig> {
 pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> {
     crate::signals::install()?; // first: a signal during start-up is then not lost
     let cfg = env_config(args)?;
-    let env_name = args.namespace.trim_matches('/').to_string();
-    if env_name.is_empty() || env_name.contains('/') {
-        bail!("--namespace '{}' must be one level, like /env0", args.namespace);
-    }
+    let namespace =
+        crate::cli_values::env_namespace(&args.namespace).map_err(|e| anyhow::anyhow!("--namespace: {e}"))?;
+    let env_name = namespace.trim_matches('/').to_string();
     let task = cfg.task.name();
     let scene = format!(
         "camera elevation {}°, {} px, corruption {}",
         cfg.camera.elevation_deg, cfg.camera.width, cfg.corruption
     );
-    let mut sim = Stepper::new(cfg, &env_name, args.seed, args.eval).context("building the simulated env")?;
-    let mut node = RosNode::new(&args.namespace, "sim", opts)?;
+    let origin = args.stamp_origin.nanos(|| {
+        let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+        i64::try_from(now.as_nanos()).unwrap_or(i64::MAX)
+    });
+    let sim = Stepper::new(cfg, &env_name, args.seed, args.eval).context("building the simulated env")?;
+    let mut sim = sim.with_stamp_origin(origin);
+    let mut node = RosNode::new(&namespace, "sim", opts)?;
     // the scene first, right after joining: a run stopped early still shows what this sim rendered
     let timeout = Duration::from_millis(args.timeout_ms.max(1));
     info!("{}: task {task}, {scene}, seed {}, env '{env_name}', re-publish after {timeout:?}", node.name(), args.seed);
@@ -158,7 +168,7 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
     let mut camera = CameraPublishers::new(&mut node, sim.env())?;
     // the frames: the camera's once (latched), the gripper's with each observation
     let tf_static_pub = node.publisher::<TFMessage>("/tf_static", qos::latched())?;
-    tf_static_pub.publish(tf_static(sim.env())).await?;
+    tf_static_pub.publish(tf_static(sim.env(), sim.origin())).await?;
     let tf_pub = node.publisher::<TFMessage>("/tf", qos::stream(100))?;
     let signal = shutdown_signal();
     tokio::pin!(signal);
@@ -253,5 +263,11 @@ pub fn snapshot(
     }
     let files = equiarm_sim::snapshot::snapshot_task(cfg, seed, steps, out)
         .with_context(|| format!("writing the snapshot of {task} into {}", out.display()))?;
+    if files.steps < steps {
+        warn!(
+            "the episode ended after {} of the {steps} steps asked for: the pictures show its last state",
+            files.steps
+        );
+    }
     Ok(vec![files.color, files.depth, files.segmentation])
 }

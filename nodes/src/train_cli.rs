@@ -120,11 +120,11 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 50, value_parser = crate::cli_values::positive_steps)]
     pub weights_every: u64,
     /// Over DDS: namespace of the evaluation sim+policy pair (its episodes carry eval = true).
-    #[arg(long, default_value = "/eval")]
+    #[arg(long, default_value = "/eval", value_parser = crate::cli_values::env_namespace)]
     pub eval_namespace: String,
     /// Over DDS: namespaces of the training envs, whose `observation` topics carry the frames the
     /// Transitions name (default: /env0 … /env{N-1} for --num-envs N).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', value_parser = crate::cli_values::env_namespace)]
     pub envs: Vec<String>,
     /// Over DDS: exit when no transition arrived for this many seconds after the first one.
     #[arg(long, default_value_t = 60.0, value_parser = crate::cli_values::seconds)]

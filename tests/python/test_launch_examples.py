@@ -309,6 +309,7 @@ def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
             _flag(tr, "--run-dir"), _flag(tr, "--total-updates"), _flag(tr, "--eval-namespace")) == \
         ("reduced16", "block_picking", "3", "7", "runs/x", "40", "/eval")
     assert "on_exit" in procs["trainer"].kwargs  # the launch ends with the trainer
+    origins = set()
     for k, ns in enumerate(["/env0", "/env1", "/env2", "/eval"]):
         name = ns.strip("/")
         sim, pol = procs[f"sim_{name}"].kwargs["cmd"], procs[f"policy_{name}"].kwargs["cmd"]
@@ -318,6 +319,7 @@ def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
         assert ("--eval" in sim) == (ns == "/eval")
         assert (_flag(sim, "--view"), _flag(sim, "--corrupt")) == ("side", "none")
         assert ("--clock" in sim) == (ns == "/env0"), "exactly one sim publishes /clock"
+        origins.add(_flag(sim, "--stamp-origin"))
         assert pol[1] == "policy" and _flag(pol, "--namespace") == ns
         assert _flag(pol, "--mode") == ("greedy" if ns == "/eval" else "sample")
         assert _flag(pol, "--image") == image and _flag(pol, "--hidden") == str(cfg["agent"]["hidden"])
@@ -326,6 +328,9 @@ def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
             assert _flag(pol, "--expert-episodes") == str((cfg["demo_episodes"] + 2) // 3)
             assert _flag(pol, "--max-lead") == "10" and "--deterministic" not in pol
     assert "--deterministic" not in tr
+    # one clock origin for every sim: the launch's start (whole seconds since 1970), not 1970 itself
+    (origin,) = origins
+    assert abs(int(origin) - time.time()) < 600, origins
 
 
 def test_launch_file_deterministic_matches_train_sh(launch_file):
@@ -399,9 +404,21 @@ def test_demo_sh_records_expert_episodes_and_leaves_nothing_running(tmp_path):
     pytest.importorskip("mcap_ros2")
     out = tmp_path / "demo"
     env = dict(os.environ, EQUIARM_BIN=_policy_shim(tmp_path), ROS_DOMAIN_ID=str(random.randint(120, 200)))
+    env.pop("EQA_STAMP_ORIGIN", None)
+    started = int(time.time())
     r = subprocess.run(["bash", str(SCRIPTS / "demo.sh"), "--num-envs", "2", "--episodes", "2", "--out", str(out)],
                        env=env, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    # the stamps' clock starts at the script's start (one origin for both envs), not in 1970
+    from bag_check import read_mcap
+    first = {}
+    for topic, _, _, _, msg in read_mcap(out / "bag"):
+        if topic.endswith("/observation"):
+            t = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+            first[topic] = min(first.get(topic, t), t)
+    assert sorted(first) == ["/env0/observation", "/env1/observation"], first
+    assert len(set(first.values())) == 1, first
+    assert started <= next(iter(first.values())) // 10**9 <= time.time(), (started, first)
     assert f"bag: {out / 'bag'}" in r.stdout
     assert "4 episodes" in r.stdout  # equiarm bag eval's table
     s = json.loads(subprocess.run([sys.executable, str(SCRIPTS / "read_bag.py"), str(out / "bag"), "--json"],

@@ -16,6 +16,8 @@ pub struct SnapshotFiles {
     pub depth: PathBuf,
     /// `<prefix>_seg.png`: the segmentation ids in false colour ([`seg_color`]), 8-bit RGB.
     pub segmentation: PathBuf,
+    /// Steps taken before the picture ([`snapshot_task`]: fewer than asked when the episode ended).
+    pub steps: u32,
 }
 
 fn save(path: &Path, bytes: &[u8], w: usize, h: usize, ty: image::ExtendedColorType) -> Result<()> {
@@ -39,6 +41,7 @@ pub fn write_pngs(frame: &Frame, dir: &Path, prefix: &str) -> Result<SnapshotFil
         color: dir.join(format!("{prefix}_color.png")),
         depth: dir.join(format!("{prefix}_depth.png")),
         segmentation: dir.join(format!("{prefix}_seg.png")),
+        steps: 0,
     };
     let (w, h) = (frame.width, frame.height);
     save(&files.color, &frame.color, w, h, image::ExtendedColorType::Rgb8)?;
@@ -54,21 +57,29 @@ pub fn write_pngs(frame: &Frame, dir: &Path, prefix: &str) -> Result<SnapshotFil
 }
 
 /// Resets an env with `config` and `seed`, takes `expert_steps` expert steps (stopping early when the
-/// episode ends), and writes the uncorrupted colour, depth and segmentation PNGs of the scene into
-/// `dir` as `<task>_color.png`, `<task>_depth.png`, `<task>_seg.png`. For `equiarm sim snapshot`.
+/// episode ends: [`SnapshotFiles::steps`] says how many were taken), and writes the uncorrupted
+/// colour, depth and segmentation PNGs of the scene into `dir` as `<task>_color.png`,
+/// `<task>_depth.png`, `<task>_seg.png`. More steps than an episode has (`config.max_steps`) are
+/// refused. For `equiarm sim snapshot`.
 pub fn snapshot_task(config: EnvConfig, seed: u64, expert_steps: u32, dir: &Path) -> Result<SnapshotFiles> {
+    if expert_steps > config.max_steps {
+        let message = format!("{expert_steps} is more than the {} steps an episode has", config.max_steps);
+        return Err(SimError::Config { field: "steps", message });
+    }
     let task = config.task;
     let mut env = Env::new(config)?;
     let mut obs = env.reset(seed)?;
-    for _ in 0..expert_steps {
+    let mut taken = 0;
+    while taken < expert_steps {
         let r = env.step(&obs.expert_action)?;
         obs = r.observation;
+        taken += 1;
         if r.done {
             break;
         }
     }
     let frame = env.render().ok_or(SimError::NotReset)?;
-    write_pngs(&frame, dir, task.name())
+    Ok(SnapshotFiles { steps: taken, ..write_pngs(&frame, dir, task.name())? })
 }
 
 #[cfg(test)]
@@ -87,6 +98,26 @@ mod tests {
         let centre = depth.get_pixel(76, 76).0[0];
         assert!((600..1000).contains(&centre), "centre depth {centre} mm");
         image::open(&files.segmentation).unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
+
+#[cfg(test)]
+mod steps_tests {
+    use super::*;
+    use crate::tasks::TaskKind;
+
+    /// Regression (issue 61): `sim snapshot --steps 4294967295` stopped silently at the episode's end.
+    /// More steps than an episode has are refused, naming the flag; an episode that ends early says
+    /// how many steps it took.
+    #[test]
+    fn snapshot_refuses_more_steps_than_an_episode_has_and_says_when_it_ended_early() {
+        let dir = std::env::temp_dir().join(format!("equiarm_sim_snapshot_steps_{}", std::process::id()));
+        let e = snapshot_task(EnvConfig::new(TaskKind::BlockPulling), 0, u32::MAX, &dir).unwrap_err();
+        assert!(e.to_string().contains("`steps`") && e.to_string().contains("4294967295"), "{e}");
+        // the expert pulls the block within 50 steps: the episode ends before the 50th
+        let files = snapshot_task(EnvConfig::new(TaskKind::BlockPulling), 0, 50, &dir).unwrap();
+        assert!(files.steps > 0 && files.steps < 50, "{}", files.steps);
         std::fs::remove_dir_all(&dir).ok();
     }
 }

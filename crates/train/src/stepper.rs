@@ -8,7 +8,8 @@
 //! answers it.
 //!
 //! Stamps come from a simulated clock: one tick of [`SimClock::step_ns`] (the physics time of one env
-//! step, `dt * substeps`) per observation made, from 0; wall time is never read.
+//! step, `dt * substeps`) per observation made, from a [`StampOrigin`] the caller passes in (0 unless
+//! told otherwise); wall time is never read here.
 
 use equiarm_msgs::builtin_interfaces::Time;
 use equiarm_msgs::geometry_msgs::{Quaternion, Transform, TransformStamped, Vector3};
@@ -45,10 +46,11 @@ fn transform(parent: &str, child: String, pose: &Isometry3<f64>, stamp: Time) ->
 }
 
 /// What the sim publishes once on `/tf_static`: the camera's optical frame in the world
-/// ([`WORLD_FRAME`] → [`CAMERA_FRAME`], the camera's extrinsics inverted), stamped at simulated time 0.
-pub fn tf_static(env: &Env) -> TFMessage {
+/// ([`WORLD_FRAME`] → [`CAMERA_FRAME`], the camera's extrinsics inverted), stamped `stamp` (the sim
+/// stamps it at the start of its clock, [`Stepper::origin`]).
+pub fn tf_static(env: &Env, stamp: Time) -> TFMessage {
     let pose = env.camera().optical_pose_in_world();
-    TFMessage { transforms: vec![transform(WORLD_FRAME, CAMERA_FRAME.to_string(), &pose, Time::default())] }
+    TFMessage { transforms: vec![transform(WORLD_FRAME, CAMERA_FRAME.to_string(), &pose, stamp)] }
 }
 
 /// What the sim publishes on `/tf` with each observation: the gripper's TCP in the world
@@ -82,25 +84,79 @@ impl From<equiarm_msgs::ObsFrameError> for StepError {
     }
 }
 
-/// Simulated time: `ticks * step_ns` nanoseconds.
+/// Where a sim's clock starts: the stamp of its first observation and of `/tf_static`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum StampOrigin {
+    /// Time 0 (1970-01-01 in a viewer): the same stamps, so the same message bytes, every run.
+    #[default]
+    Zero,
+    /// The wall clock when the sim starts (read by the node, the edge), so a viewer shows the run's
+    /// date; the stamps still advance by simulated time, not wall time.
+    Now,
+    /// This many nanoseconds after the UNIX epoch (e.g. one launch time shared by a suite's sims).
+    At(i64),
+}
+
+/// The largest origin accepted, in seconds: the last second a ROS 2 `builtin_interfaces/Time` holds
+/// (`sec` is an int32).
+pub const MAX_STAMP_ORIGIN_S: i64 = i32::MAX as i64;
+
+impl StampOrigin {
+    /// The origin in nanoseconds since the UNIX epoch; `now` gives the wall clock for [`StampOrigin::Now`].
+    pub fn nanos(self, now: impl FnOnce() -> i64) -> i64 {
+        match self {
+            StampOrigin::Zero => 0,
+            StampOrigin::Now => now(),
+            StampOrigin::At(ns) => ns,
+        }
+    }
+}
+
+impl std::str::FromStr for StampOrigin {
+    type Err = String;
+
+    /// `zero`, `now`, or seconds since the UNIX epoch (`1796000000`, `1796000000.25`), 0 ..=
+    /// [`MAX_STAMP_ORIGIN_S`].
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "zero" => Ok(StampOrigin::Zero),
+            "now" => Ok(StampOrigin::Now),
+            _ => {
+                let secs: f64 = s.parse().map_err(|_| {
+                    format!("'{s}' is not zero, now or a number of seconds since 1970-01-01 (e.g. 1796000000)")
+                })?;
+                if !(0.0..=MAX_STAMP_ORIGIN_S as f64).contains(&secs) {
+                    return Err(format!(
+                        "{s} s is outside 0 ..= {MAX_STAMP_ORIGIN_S} s (the seconds a ROS 2 Time holds)"
+                    ));
+                }
+                Ok(StampOrigin::At((secs * 1e9).round() as i64))
+            }
+        }
+    }
+}
+
+/// Simulated time: `origin_ns + ticks * step_ns` nanoseconds.
 #[derive(Clone, Copy, Debug)]
 pub struct SimClock {
     /// Simulated time of one env step, ns: `dt * substeps` of the physics settings, rounded.
     pub step_ns: i64,
-    /// Ticks taken so far (one per observation made); the next stamp is `ticks * step_ns`.
+    /// Ticks taken so far (one per observation made); the next stamp is `origin_ns + ticks * step_ns`.
     pub ticks: i64,
+    /// The first stamp, ns since the UNIX epoch.
+    pub origin_ns: i64,
 }
 
 impl SimClock {
     /// A clock at time 0 whose tick is one env step of `cfg`'s physics (`dt * substeps` seconds).
     pub fn new(cfg: &EnvConfig) -> Self {
         let step_s = cfg.params.dt as f64 * cfg.params.substeps as f64;
-        Self { step_ns: (step_s * 1e9).round() as i64, ticks: 0 }
+        Self { step_ns: (step_s * 1e9).round() as i64, ticks: 0, origin_ns: 0 }
     }
 
     /// The stamp of the next frame; advances the clock.
     pub fn tick(&mut self) -> Time {
-        let t = Time::from_nanos(self.ticks.saturating_mul(self.step_ns));
+        let t = Time::from_nanos(self.origin_ns.saturating_add(self.ticks.saturating_mul(self.step_ns)));
         self.ticks += 1;
         t
     }
@@ -183,6 +239,17 @@ impl Stepper {
             all_expert: true,
             stats: SimStats::default(),
         })
+    }
+
+    /// The same stepper with its clock starting at `origin_ns` (ns since the UNIX epoch) instead of 0.
+    pub fn with_stamp_origin(mut self, origin_ns: i64) -> Self {
+        self.clock.origin_ns = origin_ns;
+        self
+    }
+
+    /// The first stamp of this env's clock (the stamp of `/tf_static`).
+    pub fn origin(&self) -> Time {
+        Time::from_nanos(self.clock.origin_ns)
     }
 
     /// The env.
@@ -344,6 +411,8 @@ mod tests {
         assert_eq!(clock.tick().as_nanos(), 0);
         assert_eq!(clock.tick().as_nanos(), clock.step_ns);
         assert!((clock.step_ns - 166_666_667).abs() < 100, "1/6 s up to f32 dt: {}", clock.step_ns);
+        clock.origin_ns = 1_796_000_000_250_000_000;
+        assert_eq!(clock.tick().as_nanos(), clock.origin_ns + 2 * clock.step_ns, "the origin shifts every stamp");
     }
 
     /// A point given in a TransformStamped's child frame, in its parent frame.
@@ -354,10 +423,25 @@ mod tests {
     }
 
     #[test]
+    fn stamp_origins_parse_and_refuse_what_a_ros_time_cannot_hold() {
+        let parse = |s: &str| s.parse::<StampOrigin>();
+        assert_eq!(parse("zero"), Ok(StampOrigin::Zero));
+        assert_eq!(parse("now"), Ok(StampOrigin::Now));
+        assert_eq!(parse("1796000000.25"), Ok(StampOrigin::At(1_796_000_000_250_000_000)));
+        assert_eq!(StampOrigin::Now.nanos(|| 42), 42);
+        assert_eq!(StampOrigin::Zero.nanos(|| 42), 0);
+        for bad in ["-1", "inf", "NaN", "3e9", "yesterday", ""] {
+            let e = parse(bad).unwrap_err();
+            assert!(e.contains(bad) && (e.contains("outside") || e.contains("not zero, now")), "{bad}: {e}");
+        }
+    }
+
+    #[test]
     fn tf_places_the_camera_where_it_projects_from_and_the_gripper_at_its_tcp() {
         let mut env = Env::new(EnvConfig::new(equiarm_types::TaskKind::BlockPulling)).unwrap();
         assert!(tf_gripper(&env, "env3", Time::default()).is_none(), "no gripper before a reset");
-        let cam = tf_static(&env).transforms;
+        let cam = tf_static(&env, Time { sec: 7, nanosec: 0 }).transforms;
+        assert_eq!(cam[0].header.stamp, Time { sec: 7, nanosec: 0 });
         assert_eq!(
             (cam.len(), cam[0].header.frame_id.as_str(), cam[0].child_frame_id.as_str()),
             (1, WORLD_FRAME, CAMERA_FRAME)
