@@ -117,7 +117,7 @@ fn out_of_range_numbers_are_refused_at_the_flag_naming_the_range() {
     let bag = bag.to_str().unwrap();
     let run = dir.join("run");
     let run = run.to_str().unwrap();
-    let cases: [(&[&str], &str); 19] = [
+    let cases: [(&[&str], &str); 24] = [
         (&["record", "-o", bag, "--all", "--duration-s", "inf"], "outside (0, 2592000]"),
         (&["record", "-o", bag, "--all", "--duration-s", "NaN"], "outside (0, 2592000]"),
         (&["record", "-o", bag, "--all", "--flush-ms", "18446744073709551615"], "outside 1..=3600000"),
@@ -141,6 +141,17 @@ fn out_of_range_numbers_are_refused_at_the_flag_naming_the_range() {
         (&["nn", "check-equivariance", "--fresh", "--batch", "100000000"], "outside 1..=64"),
         (&["nn", "check-equivariance", "--fresh", "--batch", "0"], "outside 1..=64"),
         (&["nn", "check-equivariance", "--fresh", "--hidden", "100000000"], "outside 8..=512"),
+        // regression (issue 61): one topic recorded under two types
+        (&["record", "-o", run, "/a:std_msgs/msg/String", "/a:equiarm_msgs/msg/Observation"], "a topic has one type"),
+        // regression (issue 61): the trainer took an eval namespace the sim refuses, then waited for it
+        (&["train", "--eval-namespace", "/a/b"], "not an env namespace"),
+        (&["sim", "--namespace", "/0env"], "not an env namespace"),
+        (&["policy", "--namespace", "/env 0"], "not an env namespace"),
+        // regression (issue 61): --steps past the episode stopped silently at its end
+        (
+            &["sim", "snapshot", "--task", "block_pulling", "--out", run, "--steps", "4294967295"],
+            "more than the 50 steps",
+        ),
     ];
     for (args, expected) in cases {
         let start = Instant::now();

@@ -138,3 +138,25 @@ fn a_killed_grid_resumes_to_the_same_updates_and_reports() {
     let err = String::from_utf8_lossy(&changed.stderr);
     assert!(err.contains("batch_size") && err.contains("s3"), "{err}");
 }
+
+/// Regression (issue 61): a runs directory that cannot be made was reported as "another runner works
+/// on grid … here"; the error now says the directory cannot be made, and why.
+#[test]
+fn an_uncreatable_runs_directory_is_not_reported_as_a_busy_grid() {
+    let dir = support::scratch("experiment_uncreatable_runs");
+    let grid = dir.join("tiny.toml");
+    std::fs::write(&grid, GRID).unwrap();
+    let file = dir.join("a_file");
+    std::fs::write(&file, "").unwrap();
+    let out = equiarm()
+        .args(["experiment", "run", "tiny", "--file"])
+        .arg(&grid)
+        .arg("--runs")
+        .arg(file.join("runs"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("cannot claim grid tiny") && err.contains("Not a directory"), "{err}");
+    assert!(!err.contains("another runner"), "{err}");
+}

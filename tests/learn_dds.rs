@@ -516,6 +516,7 @@ fn trainer_options(run_dir: &std::path::Path, resume: bool) -> TrainerOptions {
         resume: resume.then(|| run_dir.to_path_buf()),
         force: false,
         eval_namespace: "/eval".into(),
+        envs: Vec::new(),
         deterministic: false,
         device: equiarm_nn::device::open("cpu").unwrap(),
         weights_every: 0,

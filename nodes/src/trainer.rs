@@ -186,11 +186,13 @@ async fn wait_for_sims(n: &mut Node, envs: &[String], stop: &AtomicBool) -> anyh
 /// Runs the trainer node until `total_updates`, a signal or the idle timeout.
 pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyhow::Result<RunSummary> {
     let stop = stop_flag(CHECKPOINT_AND_STOP); // first: a signal while the run opens is then not lost
+    let envs = args.env_namespaces(cfg.num_envs);
     let options = TrainerOptions {
         run_dir: args.run_dir(),
         resume: args.resume.clone(),
         force: args.force,
         eval_namespace: args.eval_namespace.clone(),
+        envs: envs.clone(),
         deterministic: args.deterministic,
         device: args.device.clone(),
         weights_every: args.weights_every,
@@ -199,7 +201,6 @@ pub async fn run(args: &TrainArgs, cfg: TrainConfig, opts: &RosOptions) -> anyho
     let (num_envs, deterministic) = (cfg.num_envs, args.deterministic);
     let (trainer, learner) = Trainer::open(cfg, options)?;
     let mut node = RosNode::new("/", "trainer", opts)?;
-    let envs = args.env_namespaces(num_envs);
     // (the transition and episode readers first: see wait_for_sims)
     let transitions = node.subscription::<Transition>("/transitions", qos::stream(100))?;
     let episodes = node.subscription::<EpisodeResult>("/episodes", qos::stream(100))?;

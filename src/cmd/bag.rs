@@ -189,6 +189,22 @@ pub fn run(c: BagCommand) -> anyhow::Result<ExitCode> {
             for l in &r.lost {
                 eprintln!("{}", equiarm_train::bag_report::lost_text(l));
             }
+            for d in &r.damaged_channels {
+                eprintln!(
+                    "{}: channel {} ({}) is damaged: {}; its {} messages are not copied",
+                    input.display(),
+                    equiarm_msgs::shown(&d.topic),
+                    equiarm_msgs::shown(&d.type_name),
+                    d.reason,
+                    d.messages
+                );
+            }
+            for f in &r.missing_files {
+                eprintln!(
+                    "{}: metadata.yaml lists {f}, which is not in the bag directory: its messages are lost",
+                    input.display()
+                );
+            }
             println!("recovered {} messages into {}", r.summary.messages, r.summary.dir.display());
         }
     }

@@ -69,7 +69,14 @@ pub fn run(a: RecordArgs) -> anyhow::Result<ExitCode> {
         let Some((name, ty)) = t.split_once(':') else {
             bail!("topic '{t}' must be given as TOPIC:TYPE, e.g. /env0/observation:equiarm_msgs/msg/Observation");
         };
-        topics.push((name.to_string(), ty.to_string()));
+        // one type per topic: a bag channel, and a DDS topic, has one
+        match topics.iter().find(|(n, _): &&(String, String)| n == name) {
+            Some((_, other)) if other != ty => {
+                bail!("topic '{name}' is named twice, as {other} and as {ty}: a topic has one type")
+            }
+            Some(_) => continue,
+            None => topics.push((name.to_string(), ty.to_string())),
+        }
     }
     let writer = equiarm_bag::WriterOptions {
         compression: a.compression.into(),

@@ -32,7 +32,7 @@ pub use decode::{DecodeError, same_definition};
 pub use error::BagError;
 pub use metadata_check::MetadataCheck;
 pub use reader::{BagInfo, FileInfo, FileRead, LostChunk, ReadMode, ReadReport, Reader, RecordedMessage, TopicStats};
-pub use recover::{RecoverReport, recover};
+pub use recover::{DamagedChannel, RecoverReport, recover};
 pub use writer::{BagSummary, Compression, TopicId, TopicInfo, Writer, WriterOptions};
 
 /// Nanoseconds since the Unix epoch, the time unit of every MCAP record.

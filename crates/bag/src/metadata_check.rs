@@ -51,6 +51,24 @@ pub fn check(dir: &Path, info: &BagInfo) -> Option<MetadataCheck> {
     Some(MetadataCheck { path, problems })
 }
 
+/// The files `dir/metadata.yaml` lists that are not in `dir` (empty when it has no readable
+/// metadata: `check` reports why).
+pub(crate) fn listed_but_missing(dir: &Path) -> Vec<String> {
+    let path = dir.join("metadata.yaml");
+    let small = std::fs::metadata(&path).is_ok_and(|m| m.len() <= MAX_BYTES);
+    let Some(text) = small.then(|| std::fs::read(&path).ok()).flatten() else { return Vec::new() };
+    let text = String::from_utf8_lossy(&text);
+    if unbounded(&text).is_some() {
+        return Vec::new();
+    }
+    let docs = YamlLoader::load_from_str(&text).unwrap_or_default();
+    let Some(listed) = docs.first().and_then(|d| d["rosbag2_bagfile_information"]["relative_file_paths"].as_vec())
+    else {
+        return Vec::new();
+    };
+    listed.iter().filter_map(Yaml::as_str).filter(|n| !dir.join(n).exists()).map(str::to_string).collect()
+}
+
 /// The `metadata.yaml` versions rosbag2 has written, up to Jazzy's 8 (the one we write); the fields
 /// checked here have meant the same in all of them.
 const KNOWN_VERSIONS: std::ops::RangeInclusive<u64> = 1..=8;

@@ -154,3 +154,78 @@ fn an_empty_split_file_is_reported_and_the_other_files_are_read() {
     }
     assert!(matches!(Reader::open(&s.dir).err().unwrap(), BagError::Empty { .. }));
 }
+
+/// Regression (issue 61): `bag recover` copied a corrupted schema record (outside any chunk, so no
+/// checksum covers it) into a bag that `bag info` then called complete. A channel whose schema is
+/// not a message definition is now left out and reported with its message count; the other
+/// channels are recovered.
+#[test]
+fn a_damaged_schema_outside_the_chunks_is_reported_and_its_channel_left_out() {
+    let dir = scratch("damaged_schema");
+    let opts = WriterOptions { compression: equiarm_bag::Compression::None, chunk_size: 2 << 10, ..Default::default() };
+    let mut w = Writer::create(&dir.join("bag"), opts).unwrap();
+    let qos = [equiarm_bag::qos::OfferedQos::reliable(10)];
+    let cmd = w.add_topic(TopicInfo::of::<GripperCommand>("/env0/gripper_cmd", &qos)).unwrap();
+    let ep = w.add_topic(TopicInfo::of::<equiarm_msgs::msg::EpisodeResult>("/episodes", &qos)).unwrap();
+    for k in 0..N {
+        let t = T0 + k as u64 * 1_000_000;
+        let m = GripperCommand { obs_seq: k as u64, ..Default::default() };
+        w.write(cmd, t, t, &cdr::encode(&m).unwrap()).unwrap();
+        let e = equiarm_msgs::msg::EpisodeResult { episode: k, ..Default::default() };
+        w.write(ep, t, t, &cdr::encode(&e).unwrap()).unwrap();
+    }
+    let s = w.finish().unwrap();
+    let file = s.dir.join(&s.files[0]);
+    let mut bytes = std::fs::read(&file).unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    let in_chunk = |at: usize| {
+        summary
+            .chunk_indexes
+            .iter()
+            .any(|c| (c.chunk_start_offset..c.chunk_start_offset + c.chunk_length).contains(&(at as u64)))
+    };
+    // every copy of the command's definition outside the chunks loses a bit (no longer UTF-8)
+    let needle = b"uint64 obs_seq";
+    let hits: Vec<usize> =
+        (0..bytes.len() - needle.len()).filter(|&i| &bytes[i..i + needle.len()] == needle && !in_chunk(i)).collect();
+    assert!(!hits.is_empty(), "the definition is stored outside the chunks");
+    for i in hits {
+        bytes[i + 7] ^= 0x80;
+    }
+    std::fs::write(&file, &bytes).unwrap();
+
+    let out = dir.join("recovered");
+    let r = recover(&s.dir, &out, WriterOptions::default()).unwrap();
+    assert_eq!(r.damaged_channels.len(), 1, "{:?}", r.damaged_channels);
+    let d = &r.damaged_channels[0];
+    assert_eq!((d.topic.as_str(), d.messages), ("/env0/gripper_cmd", N as u64), "{d:?}");
+    assert!(d.reason.contains("not UTF-8"), "{}", d.reason);
+    let info = Reader::open(&out).unwrap().info().unwrap();
+    assert_eq!(info.topics.keys().collect::<Vec<_>>(), ["/episodes"], "only the intact channel is copied");
+    assert_eq!(info.messages, N as u64);
+}
+
+/// Regression (issue 61): `bag recover` said nothing about a file `metadata.yaml` lists but that is
+/// gone from the bag directory; it now reports it (its messages are lost), and recovers the rest.
+#[test]
+fn recover_reports_a_listed_file_that_is_missing() {
+    let dir = scratch("missing_split");
+    let s = bag_with(&dir, WriterOptions { chunk_size: 2 << 10, split_bytes: Some(6 << 10), ..Default::default() });
+    assert!(s.files.len() >= 3, "{:?}", s.files);
+    let gone = s.dir.join(&s.files[1]);
+    let lost = Reader::open(&gone).unwrap().info().unwrap().messages;
+    std::fs::remove_file(&gone).unwrap();
+    let r = recover(&s.dir, &dir.join("recovered"), WriterOptions::default()).unwrap();
+    assert_eq!(r.missing_files, vec![s.files[1].clone()]);
+    assert_eq!(r.summary.messages, N as u64 - lost);
+}
+
+/// Regression (issue 61): a directory where a bag file belongs (`NAME_0.mcap/`) was reported as "No
+/// such device (os error 19)"; the error names it as a directory.
+#[test]
+fn a_directory_named_like_a_bag_file_is_named_as_a_directory() {
+    let dir = scratch("dir_for_file");
+    std::fs::create_dir_all(dir.join("bag").join("bag_0.mcap")).unwrap();
+    let e = Reader::open(&dir.join("bag")).err().unwrap().to_string();
+    assert!(e.contains("bag_0.mcap: is a directory, where a file was expected"), "{e}");
+}

@@ -156,12 +156,15 @@ pub fn run(cmd: ExperimentCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
             }
             // One runner per grid; grids may share a runs directory (and the runs they have in
             // common: a run's directory is named by its cell, and its config must agree).
-            let _claim = RunDirLock::acquire(&grid.runs.join(".grids").join(&at.name)).map_err(|e| {
-                crate::ExperimentError::Run {
-                    dir: grid.runs.clone(),
-                    message: format!("another runner works on grid {} here ({e})", at.name),
+            let run_err = |message: String| crate::ExperimentError::Run { dir: grid.runs.clone(), message };
+            let _claim = match RunDirLock::try_acquire(&grid.runs.join(".grids").join(&at.name)) {
+                Ok(Some(claim)) => claim,
+                Ok(None) => return Err(run_err(format!("another runner works on grid {} here", at.name))),
+                // (the runs directory cannot be made or written: say that, not that it is busy)
+                Err(e) => {
+                    return Err(run_err(format!("cannot claim grid {} in the runs directory: {e}", at.name)));
                 }
-            })?;
+            };
             let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
             let opts = RunnerOptions {
                 parallel: parallel.unwrap_or((cores / threads as usize).max(1)),

@@ -183,11 +183,15 @@ impl Dataset {
         }
         let n = u64::from_le_bytes(head[12..20].try_into().expect("8 bytes"));
         let mut json = Vec::new();
-        f.take(n).read_to_end(&mut json).map_err(at(&path))?;
+        (&mut f).take(n).read_to_end(&mut json).map_err(at(&path))?;
         if json.len() as u64 != n {
             return Err(bad(format!("header of {n} bytes runs past the end of the file (truncated?)")));
         }
-        serde_json::from_slice(&json).map_err(|e| bad(format!("header: {e}")))
+        let header: Header = serde_json::from_slice(&json).map_err(|e| bad(format!("header: {e}")))?;
+        // checked as `read` checks it, so no reader takes a header that training refuses
+        let file_len = f.metadata().map_err(at(&path))?.len();
+        check_header(&header, file_len.saturating_sub(20 + n)).map_err(bad)?;
+        Ok(header)
     }
 
     /// Reads a dataset: `path` is the file or the directory holding `pairs.rotest`. Only the first
@@ -210,15 +214,7 @@ impl Dataset {
             bad(format!("header of {n} bytes runs past the end of the {}-byte file (truncated?)", bytes.len()))
         })?;
         let mut header: Header = serde_json::from_slice(&bytes[20..body]).map_err(|e| bad(format!("header: {e}")))?;
-        if header.chunks.len() != header.pairs.len() {
-            return Err(bad(format!("{} pairs but {} chunks in the header", header.pairs.len(), header.chunks.len())));
-        }
-        if !(1..=equiarm_sim::rotest::pair::MAX_SIZE).contains(&header.size) {
-            return Err(bad(format!("image size {} in the header", header.size)));
-        }
-        if let Some(bad_label) = header.pairs.iter().position(|m| m.label >= 8 || m.idx >= 8) {
-            return Err(bad(format!("pair {bad_label}: label or rotation outside 0..8")));
-        }
+        check_header(&header, (bytes.len() - body) as u64).map_err(bad)?;
         let count = limit.map_or(header.pairs.len(), |l| l.min(header.pairs.len()));
         header.pairs.truncate(count);
         header.chunks.truncate(count);
@@ -248,4 +244,23 @@ impl Dataset {
             .collect::<Result<Vec<_>>>()?;
         Ok(Self { header, pairs })
     }
+}
+
+/// What a header must hold for its pairs to be read (by training, `bound`, everything): one chunk per
+/// pair, each inside the `data_len` bytes after the header, an image size the pairs can have, and
+/// labels and rotations among the 8 angles.
+fn check_header(header: &Header, data_len: u64) -> std::result::Result<(), String> {
+    if header.chunks.len() != header.pairs.len() {
+        return Err(format!("{} pairs but {} chunks in the header", header.pairs.len(), header.chunks.len()));
+    }
+    if !(1..=equiarm_sim::rotest::pair::MAX_SIZE).contains(&header.size) {
+        return Err(format!("image size {} in the header", header.size));
+    }
+    if let Some(bad_label) = header.pairs.iter().position(|m| m.label >= 8 || m.idx >= 8) {
+        return Err(format!("pair {bad_label}: label or rotation outside 0..8"));
+    }
+    if let Some(i) = header.chunks.iter().position(|c| c.offset.checked_add(c.len).is_none_or(|e| e > data_len)) {
+        return Err(format!("pair {i}: chunk runs past the end of the file (truncated?)"));
+    }
+    Ok(())
 }

@@ -306,3 +306,27 @@ fn a_stopped_grid_keeps_its_finished_runs_and_the_same_command_continues() {
     assert!(text.contains("all 3 runs: 0 finished here, 3 archived in "), "{text}");
     assert!(text.contains(", 0 unfinished (cut short, or in training now), 0 not started\n"), "{text}");
 }
+
+/// Regression (issue 61): `rotest bound` read a dataset's header without the checks training makes,
+/// and printed a bound of 1.0000 for a dataset `rotest train` refuses. Every reader of the header now
+/// checks it as training does.
+#[test]
+fn the_bound_refuses_a_header_that_training_refuses() {
+    let ds = data("none", 16, 4, 2);
+    let dir = scratch("bad_header");
+    let path = ds.write(&dir).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let n = u64::from_le_bytes(bytes[12..20].try_into().unwrap()) as usize;
+    let mut header: serde_json::Value = serde_json::from_slice(&bytes[20..20 + n]).unwrap();
+    header["pairs"][1]["label"] = 9.into();
+    let json = serde_json::to_vec(&header).unwrap();
+    let mut damaged = bytes[..12].to_vec();
+    damaged.extend_from_slice(&(json.len() as u64).to_le_bytes());
+    damaged.extend_from_slice(&json);
+    damaged.extend_from_slice(&bytes[20 + n..]);
+    std::fs::write(&path, &damaged).unwrap();
+    let from_training = Dataset::read(&dir, None).unwrap_err().to_string();
+    let from_bound = Dataset::read_header(&dir).unwrap_err().to_string();
+    assert!(from_training.contains("pair 1: label or rotation outside 0..8"), "{from_training}");
+    assert_eq!(from_bound, from_training, "both readers refuse it alike");
+}

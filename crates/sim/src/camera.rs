@@ -111,8 +111,8 @@ pub struct Camera {
 
 impl Camera {
     /// Validates `config` and computes the intrinsics and the pose. A value out of its domain is a
-    /// [`SimError::Config`] naming the field: elevation in (0, 90]°, distance > 0, field of view in
-    /// (1, 170)°, width and height in 1..=8192, 0 < near < far, finite target.
+    /// [`SimError::Config`] naming the field: elevation in (0, 90]°, distance > 0 and between near and
+    /// far, field of view in (1, 170)°, width and height in 1..=8192, 0 < near < far, finite target.
     pub fn new(config: CameraConfig) -> Result<Self> {
         let c = &config;
         let bad = |field: &'static str, message: String| Err(SimError::Config { field, message });
@@ -133,6 +133,17 @@ impl Camera {
         }
         if !c.target.iter().all(|x| x.is_finite()) {
             return bad("target", "must be finite".into());
+        }
+        // the target (the workspace's centre) must be in front of the near plane and before the far
+        // one, or every pixel is clipped: a blank image of depth `far`
+        if !(c.distance > c.near && c.distance < c.far) {
+            return bad(
+                "distance",
+                format!(
+                    "{} m must be between near ({}) and far ({}): the target would be clipped",
+                    c.distance, c.near, c.far
+                ),
+            );
         }
         let e = c.elevation_deg.to_radians();
         let target = Point3::from(c.target);
@@ -267,5 +278,16 @@ mod tests {
         assert!(Camera::new(bad).unwrap_err().to_string().contains("fov_y_deg"));
         let bad = CameraConfig { elevation_deg: 0.0, ..Default::default() };
         assert!(Camera::new(bad).unwrap_err().to_string().contains("elevation_deg"));
+    }
+
+    /// Regression (issue 61): a camera distance of 1e12 m was accepted and rendered a blank image
+    /// (everything beyond the far plane). The target must lie between the clipping planes.
+    #[test]
+    fn a_camera_distance_that_clips_the_target_is_refused() {
+        for d in [1e12, 3.0, 0.05] {
+            let e = Camera::new(CameraConfig { distance: d, ..Default::default() }).unwrap_err().to_string();
+            assert!(e.contains("`distance`") && e.contains("clipped"), "{d}: {e}");
+        }
+        Camera::new(CameraConfig { distance: 2.9, ..Default::default() }).unwrap();
     }
 }

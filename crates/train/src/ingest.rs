@@ -109,6 +109,10 @@ pub enum BadTransition {
         /// Its value.
         value: f32,
     },
+    /// It comes from an env that is not one of the run's (whose Observations the trainer never
+    /// receives, so it could only wait, and its state grow with every name a peer makes up).
+    #[error("env '{}' is not one of this run's", equiarm_msgs::shown(.0))]
+    UnknownEnv(String),
 }
 
 impl BadTransition {
@@ -118,6 +122,7 @@ impl BadTransition {
             BadTransition::Reward(_) => "reward",
             BadTransition::Action { .. } => "action",
             BadTransition::Orphan { .. } => "orphan",
+            BadTransition::UnknownEnv(_) => "unknown env",
         }
     }
 }
@@ -141,6 +146,8 @@ pub struct Ingest {
     image_size: usize,
     timeout_terminal: bool,
     envs: HashMap<String, EnvFrames>,
+    /// The run's training envs, when known ([`Ingest::with_envs`]): Transitions of others are refused.
+    known: Option<BTreeSet<String>>,
     held: HashMap<Key, (Vec<Stored>, bool)>,
     decided: HashMap<Key, bool>,
     /// What happened so far.
@@ -156,10 +163,18 @@ impl Ingest {
             image_size: cfg.image_size,
             timeout_terminal: cfg.timeout_terminal,
             envs: HashMap::new(),
+            known: None,
             held: HashMap::new(),
             decided: HashMap::new(),
             counts: Received::default(),
         }
+    }
+
+    /// The same ingest, taking Transitions only from these training envs (namespaces or names:
+    /// `/env0` or `env0`) and the eval env; others are refused as [`BadTransition::UnknownEnv`].
+    pub fn with_envs<S: AsRef<str>>(mut self, envs: &[S]) -> Self {
+        self.known = Some(envs.iter().map(|e| e.as_ref().trim_matches('/').to_string()).collect());
+        self
     }
 
     /// Transitions waiting for their Observations now (all envs): at the end of a run, those whose
@@ -223,6 +238,10 @@ impl Ingest {
         if let Err(e) = check_values(&t) {
             self.counts.bad += 1;
             return Err(e);
+        }
+        if self.known.as_ref().is_some_and(|k| !k.contains(&t.env)) {
+            self.counts.bad += 1;
+            return Err(BadTransition::UnknownEnv(t.env));
         }
         let env = self.envs.entry(t.env.clone()).or_default();
         if let Some(&seq) = [t.obs_seq, t.next_obs_seq].iter().find(|s| env.refused.contains(s)) {
@@ -397,5 +416,29 @@ mod debt_tests {
         assert_eq!(d.owed(), 1);
         d.episode(1, 3);
         assert_eq!(d.owed(), 1);
+    }
+}
+
+#[cfg(test)]
+mod env_tests {
+    use super::*;
+
+    /// Regression (issue 61): a Transition of any env name was kept waiting for Observations the
+    /// trainer never receives, so a peer inventing names grew the ingest's state without bound. With
+    /// the run's envs known, others are refused and counted; the run's and the eval env's are taken.
+    #[test]
+    fn transitions_of_envs_outside_the_run_are_refused_and_counted() {
+        let cfg = TrainConfig::reduced(equiarm_types::TaskKind::BlockPulling);
+        let mut ingest = Ingest::new(&cfg, "/eval").with_envs(&["/env0", "/env1"]);
+        for k in 0..1000 {
+            let t = Transition { env: format!("made_up_{k}"), obs_seq: 0, next_obs_seq: 1, ..Default::default() };
+            let e = ingest.transition(t).unwrap_err();
+            assert!(matches!(e, BadTransition::UnknownEnv(_)) && e.cause() == "unknown env", "{e}");
+        }
+        assert_eq!((ingest.counts.bad, ingest.envs.len(), ingest.waiting()), (1000, 0, 0));
+        let ok = |env: &str| Transition { env: env.into(), obs_seq: 0, next_obs_seq: 1, ..Default::default() };
+        assert!(ingest.transition(ok("env1")).unwrap().is_none(), "waits for its Observations");
+        assert!(ingest.transition(ok("eval")).unwrap().is_none(), "the eval env's are counted");
+        assert_eq!((ingest.waiting(), ingest.counts.eval), (1, 1));
     }
 }

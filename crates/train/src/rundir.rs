@@ -132,17 +132,23 @@ impl RunDirLock {
             return Ok(claim);
         }
         if !force {
+            // --resume only where there is a checkpoint to continue from
+            let resume = match find_checkpoint(run_dir) {
+                Ok(_) => format!("continue it with --resume {}, ", run_dir.display()),
+                Err(_) => "it has no checkpoint to continue from: ".to_string(),
+            };
             return Err(TrainError::RunDir {
                 path: run_dir.into(),
                 message: format!(
-                    "holds a run already ({}): continue it with --resume {}, choose another --run-dir, or pass --force to move it aside",
+                    "holds a run already ({}): {resume}choose another --run-dir, or pass --force to move it aside",
                     found.join(", "),
-                    run_dir.display()
                 ),
             });
         }
+        // (by its components: `run/` names `run`, and `run/.old-1` would be inside it)
+        let base: PathBuf = run_dir.components().collect();
         let aside = (1u32..)
-            .map(|n| PathBuf::from(format!("{}.old-{n}", run_dir.display())))
+            .map(|n| PathBuf::from(format!("{}.old-{n}", base.display())))
             .find(|p| !p.exists())
             .expect("a free name");
         drop(claim);
@@ -190,7 +196,76 @@ pub fn find_checkpoint(path: &Path) -> Result<PathBuf, TrainError> {
         path: latest.clone(),
         message: format!("{e} (not a checkpoint directory nor a run directory with checkpoints)"),
     })?;
-    Ok(path.join("checkpoints").join(name.trim()))
+    newest_intact(&path.join("checkpoints"), name.trim())
+}
+
+/// The files every checkpoint holds (the agent's, the replay, the counters, the manifest, which is
+/// written last).
+const CHECKPOINT_FILES: [&str; 9] = [
+    "actor.safetensors",
+    "critic.safetensors",
+    "critic_target.safetensors",
+    "actor_optim.safetensors",
+    "critic_optim.safetensors",
+    "agent.json",
+    "replay.bin.zst",
+    "learner.json",
+    "manifest.json",
+];
+
+/// What checkpoint `ck` lacks: of the files every checkpoint holds, and of those the run's older
+/// checkpoint `older` holds (a run writes the same files each time: a loop state, CURL's weights).
+fn lacks(ck: &Path, older: Option<&Path>) -> Vec<String> {
+    let names = |d: &Path| -> Vec<String> {
+        std::fs::read_dir(d)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect()
+    };
+    let mut want: Vec<String> = CHECKPOINT_FILES.iter().map(|f| f.to_string()).collect();
+    for f in older.map(names).unwrap_or_default() {
+        if !want.contains(&f) && !f.ends_with(".tmp") {
+            want.push(f);
+        }
+    }
+    want.into_iter().filter(|f| !ck.join(f).is_file()).collect()
+}
+
+/// The checkpoint `latest` of `root` (a run's `checkpoints/`) if it is whole, else the newest older
+/// one that is, with a warning saying what the newer ones lack; an error if none is whole.
+fn newest_intact(root: &Path, latest: &str) -> Result<PathBuf, TrainError> {
+    let step = |n: &str| n.strip_prefix("step_").and_then(|k| k.parse::<u64>().ok());
+    let newest = step(latest).unwrap_or(u64::MAX);
+    let mut steps: Vec<(u64, String)> = std::fs::read_dir(root)
+        .map_err(at(root))?
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter_map(|n| step(&n).filter(|&k| k <= newest && root.join(&n).is_dir()).map(|k| (k, n)))
+        .collect();
+    steps.sort_unstable_by(|a, b| b.cmp(a));
+    let mut steps: Vec<String> = steps.into_iter().map(|(_, n)| n).collect();
+    if steps.first().map(String::as_str) != Some(latest) {
+        steps.insert(0, latest.to_string()); // (named but gone: it lacks everything)
+    }
+    let mut skipped = Vec::new();
+    for (k, name) in steps.iter().enumerate() {
+        let ck = root.join(name);
+        let missing = lacks(&ck, steps.get(k + 1).map(|o| root.join(o)).as_deref());
+        if missing.is_empty() {
+            if !skipped.is_empty() {
+                log::warn!(
+                    "{}: resuming from {name}, the newest whole checkpoint ({})",
+                    root.display(),
+                    skipped.join("; ")
+                );
+            }
+            return Ok(ck);
+        }
+        skipped.push(format!("{name} lacks {}", missing.join(", ")));
+    }
+    Err(TrainError::RunDir { path: root.into(), message: format!("no whole checkpoint ({})", skipped.join("; ")) })
 }
 
 #[cfg(test)]
@@ -234,13 +309,20 @@ mod tests {
             e.contains(&*dir.to_string_lossy()) && e.contains("holds a run already (metrics.csv, checkpoints)"),
             "{e}"
         );
-        assert!(e.contains("--resume") && e.contains("--run-dir") && e.contains("--force"), "{e}");
+        // Regression (issue 61): the refusal suggested --resume for a run without a checkpoint.
+        assert!(e.contains("no checkpoint to continue from") && !e.contains("--resume"), "{e}");
+        assert!(e.contains("--run-dir") && e.contains("--force"), "{e}");
         assert!(dir.join("metrics.csv").is_file(), "the refused run touched nothing");
         // Resuming that run in its own directory is allowed; a new run from another run's
         // checkpoint is not.
         let ck = dir.join("checkpoints").join("step_0000010");
         std::fs::create_dir_all(&ck).unwrap();
-        std::fs::write(ck.join("manifest.json"), "{}").unwrap();
+        for f in CHECKPOINT_FILES {
+            std::fs::write(ck.join(f), "{}").unwrap();
+        }
+        std::fs::write(dir.join("checkpoints").join("latest"), "step_0000010\n").unwrap();
+        let e = RunDirLock::acquire_new(&dir, false).unwrap_err().to_string();
+        assert!(e.contains(&format!("--resume {}", dir.display())), "with a checkpoint, --resume is the way on: {e}");
         drop(RunDirLock::acquire_for(&dir, Some(&ck), false).unwrap());
         drop(RunDirLock::acquire_for(&dir, Some(&dir), false).unwrap());
         let other = root.join("other");
@@ -255,6 +337,42 @@ mod tests {
         std::fs::write(dir.join("metrics.csv"), "").unwrap();
         drop(RunDirLock::acquire_new(&dir, true).unwrap());
         assert!(root.join("run.old-2").join("metrics.csv").is_file(), "the next free name");
+        // Regression (issue 61): `--run-dir run/ --force` failed, moving `run/` into `run/.old-1`.
+        std::fs::write(dir.join("metrics.csv"), "").unwrap();
+        let mut slashed = dir.clone().into_os_string();
+        slashed.push("/");
+        drop(RunDirLock::acquire_new(Path::new(&slashed), true).unwrap());
+        assert!(root.join("run.old-3").join("metrics.csv").is_file(), "a trailing slash names the same directory");
+    }
+
+    /// Regression (issue 61): resume took the newest checkpoint even when it lacked a file, and
+    /// failed; it now falls back to the newest whole one, saying so, and fails only when none is.
+    #[test]
+    fn resume_falls_back_to_the_newest_whole_checkpoint() {
+        let dir = tempfile::tempdir().unwrap();
+        let run = dir.path();
+        let root = run.join("checkpoints");
+        for step in [10u64, 20, 30] {
+            let ck = root.join(step_dir_name(step));
+            std::fs::create_dir_all(&ck).unwrap();
+            for f in CHECKPOINT_FILES.iter().chain(&["loop.json"]) {
+                std::fs::write(ck.join(f), "{}").unwrap();
+            }
+        }
+        write_latest(run, 30).unwrap();
+        assert_eq!(find_checkpoint(run).unwrap(), root.join("step_0000030"));
+        // the newest lacks the run's loop state (a file its older checkpoints have): step 20
+        std::fs::remove_file(root.join("step_0000030").join("loop.json")).unwrap();
+        assert_eq!(find_checkpoint(run).unwrap(), root.join("step_0000020"));
+        // and when that lacks its replay too: step 10
+        std::fs::remove_file(root.join("step_0000020").join("replay.bin.zst")).unwrap();
+        assert_eq!(find_checkpoint(run).unwrap(), root.join("step_0000010"));
+        // a pointer to a checkpoint that is gone falls back as well
+        std::fs::remove_dir_all(root.join("step_0000030")).unwrap();
+        assert_eq!(find_checkpoint(run).unwrap(), root.join("step_0000010"));
+        std::fs::remove_file(root.join("step_0000010").join("manifest.json")).unwrap();
+        let e = find_checkpoint(run).unwrap_err().to_string();
+        assert!(e.contains("no whole checkpoint") && e.contains("step_0000010 lacks manifest.json"), "{e}");
     }
 
     #[test]

@@ -83,6 +83,9 @@ pub struct TrainerOptions {
     pub force: bool,
     /// The eval env's namespace: its transitions are never stored, its results are evaluations.
     pub eval_namespace: String,
+    /// The training envs' namespaces: Transitions of other envs are refused (empty: any env's are
+    /// taken).
+    pub envs: Vec<String>,
     /// Lock-step rounds.
     pub deterministic: bool,
     /// Where the learner's tensors live.
@@ -190,7 +193,10 @@ impl Trainer {
         let now = Instant::now();
         let known = (learner.updates(), learner.replay().len(), learner.replay().expert_len(), Metrics::default());
         let trainer = Trainer {
-            ingest: Ingest::new(&cfg, &opts.eval_namespace),
+            ingest: match opts.envs.is_empty() {
+                true => Ingest::new(&cfg, &opts.eval_namespace),
+                false => Ingest::new(&cfg, &opts.eval_namespace).with_envs(&opts.envs),
+            },
             lockstep: opts.deterministic.then(|| Lockstep::new(cfg.num_envs)),
             debt: UpdateDebt::new(cfg.num_envs, cfg.training_starts),
             pending_eval: Vec::new(),

@@ -21,7 +21,19 @@ pub struct FileError {
 /// `std::fs::read(&p).map_err(at(&p))?`.
 pub fn at(path: impl AsRef<Path>) -> impl FnOnce(io::Error) -> FileError {
     let path = path.as_ref().to_path_buf();
-    move |cause| FileError { path, cause }
+    move |cause| {
+        // A directory where a file was expected: the system's words for it vary with the call
+        // ("Is a directory" for a read, "No such device" for a memory map), so say it plainly.
+        const ENODEV: i32 = 19;
+        const EISDIR: i32 = 21;
+        let cause = match cause.raw_os_error() {
+            Some(ENODEV | EISDIR) if path.is_dir() => {
+                io::Error::new(cause.kind(), "is a directory, where a file was expected")
+            }
+            _ => cause,
+        };
+        FileError { path, cause }
+    }
 }
 
 /// Writes `path` whole or not at all: `write` fills `NAME.tmp` beside it (buffered), which is
@@ -67,6 +79,18 @@ mod tests {
         let _ = std::fs::remove_dir_all(&d);
         std::fs::create_dir_all(&d).unwrap();
         d
+    }
+
+    /// Regression (issue 61): a directory given for a file was reported as "No such device (os
+    /// error 19)" (a memory map's words); it is named as a directory.
+    #[test]
+    fn a_directory_given_for_a_file_is_named_as_one() {
+        let d = scratch("dir");
+        let e = std::fs::read(&d).map_err(at(&d)).unwrap_err();
+        assert!(e.to_string().ends_with(": is a directory, where a file was expected"), "{e}");
+        let missing = d.join("nothing");
+        let e = std::fs::read(&missing).map_err(at(&missing)).unwrap_err();
+        assert!(e.to_string().contains("No such file"), "{e}");
     }
 
     #[test]
