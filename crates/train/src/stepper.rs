@@ -122,15 +122,19 @@ impl std::str::FromStr for StampOrigin {
             "zero" => Ok(StampOrigin::Zero),
             "now" => Ok(StampOrigin::Now),
             _ => {
-                let secs: f64 = s.parse().map_err(|_| {
-                    format!("'{s}' is not zero, now or a number of seconds since 1970-01-01 (e.g. 1796000000)")
-                })?;
-                if !(0.0..=MAX_STAMP_ORIGIN_S as f64).contains(&secs) {
-                    return Err(format!(
-                        "{s} s is outside 0 ..= {MAX_STAMP_ORIGIN_S} s (the seconds a ROS 2 Time holds)"
-                    ));
+                // exactly, as decimal digits: an f64 holds whole nanoseconds since 1970 only to 256 ns
+                let not =
+                    || format!("'{s}' is not zero, now or a number of seconds since 1970-01-01 (e.g. 1796000000)");
+                let (whole, frac) = s.split_once('.').unwrap_or((s, ""));
+                let digits = |d: &str| d.bytes().all(|b| b.is_ascii_digit());
+                if whole.is_empty() || !digits(whole) || !digits(frac) || frac.len() > 9 {
+                    return Err(not());
                 }
-                Ok(StampOrigin::At((secs * 1e9).round() as i64))
+                let secs = whole.parse::<i64>().ok().filter(|&v| v <= MAX_STAMP_ORIGIN_S).ok_or_else(|| {
+                    format!("{s} s is outside 0 ..= {MAX_STAMP_ORIGIN_S} s (the seconds a ROS 2 Time holds)")
+                })?;
+                let nanos = format!("{frac:0<9}").parse::<i64>().map_err(|_| not())?;
+                Ok(StampOrigin::At(secs * 1_000_000_000 + nanos))
             }
         }
     }
@@ -430,7 +434,8 @@ mod tests {
         assert_eq!(parse("1796000000.25"), Ok(StampOrigin::At(1_796_000_000_250_000_000)));
         assert_eq!(StampOrigin::Now.nanos(|| 42), 42);
         assert_eq!(StampOrigin::Zero.nanos(|| 42), 0);
-        for bad in ["-1", "inf", "NaN", "3e9", "yesterday", ""] {
+        assert_eq!(parse("1796000000.000000001"), Ok(StampOrigin::At(1_796_000_000_000_000_001)), "exact to 1 ns");
+        for bad in ["-1", "inf", "NaN", "3e9", "yesterday", "", "3000000000", "1.0000000001", ".5"] {
             let e = parse(bad).unwrap_err();
             assert!(e.contains(bad) && (e.contains("outside") || e.contains("not zero, now")), "{bad}: {e}");
         }
