@@ -191,12 +191,70 @@ pub fn all() -> Vec<Target> {
             seeds: |_| Ok(GRIDS.iter().map(|g| g.as_bytes().to_vec()).collect()),
             harness: |_| Ok(Box::new(GridToml)),
         },
+        Target {
+            name: "rotest_dataset",
+            about: "a rotation-estimation dataset (a whole `pairs.rotest`, or its JSON header, a NUL and the chunks): Dataset::read and read_header agree",
+            shape: Shape::Text,
+            max_len: 1 << 14,
+            dictionary: &["\"size\":", "\"pairs\":", "\"chunks\":", "\"offset\":", "\"len\":", "\"label\":", "\"idx\":", "1024", "{", "}", "[", "]", ","],
+            seeds: rotest_seeds,
+            harness: |s| Ok(Box::new(RotestDataset { path: s.join("pairs.rotest") })),
+        },
     ]);
     t
 }
 
 // ---------------------------------------------------------------------------------------------
 // Files and frames from outside (issue 61)
+
+/// Two small datasets, each as a whole file and as header, NUL, chunks (the form whose length
+/// prefix the harness writes, so that mutations of the header reach the checks behind it).
+fn rotest_seeds(scratch: &Path) -> Result<Vec<Vec<u8>>, SetupError> {
+    use equiarm_rotest::dataset::Dataset;
+    use equiarm_sim::rotest::{Corruptions, PairConfig};
+    let mut out = Vec::new();
+    for (setting, seed) in [("none", 1), ("condition_reverse", 2)] {
+        let corruptions = Corruptions::parse(setting).map_err(|e| SetupError::project("a seed's setting")(&e))?;
+        let cfg = PairConfig { size: 8, supersample: 1, corruptions };
+        let ds = equiarm_rotest::generate::generate(&cfg, 2, seed)
+            .map_err(|e| SetupError::project("generating a seed dataset")(&e))?;
+        let path = ds.write(&scratch.join(setting)).map_err(|e| SetupError::project("writing a seed dataset")(&e))?;
+        let file = std::fs::read(&path).map_err(equiarm_types::files::at(&path))?;
+        Dataset::read(&path, None).map_err(|e| SetupError::project("reading a seed dataset")(&e))?;
+        let n = u64::from_le_bytes(file[12..20].try_into().expect("8 bytes")) as usize;
+        out.push([&file[20..20 + n], &[0u8][..], &file[20 + n..]].concat());
+        out.push(file);
+    }
+    Ok(out)
+}
+
+struct RotestDataset {
+    path: PathBuf,
+}
+
+impl Harness for RotestDataset {
+    fn run(&mut self, input: &[u8]) -> bool {
+        use equiarm_rotest::dataset::{Dataset, MAGIC, VERSION};
+        let file = match input.iter().position(|&b| b == 0) {
+            Some(nul) if !input.starts_with(MAGIC) => {
+                let (header, data) = (&input[..nul], &input[nul + 1..]);
+                [&MAGIC[..], &VERSION.to_le_bytes(), &(header.len() as u64).to_le_bytes(), header, data].concat()
+            }
+            _ => input.to_vec(),
+        };
+        std::fs::write(&self.path, &file).expect("writing the input file");
+        let header = Dataset::read_header(&self.path);
+        match Dataset::read(&self.path, None) {
+            Ok(ds) => {
+                let header = header.unwrap_or_else(|e| panic!("read accepts a dataset whose header read_header refuses: {e}"));
+                assert_eq!(header.pairs, ds.header.pairs, "read and read_header give other pairs");
+                assert_eq!(ds.pairs.len(), ds.header.pairs.len(), "one stored pair per header pair");
+                true
+            }
+            Err(_) => false,
+        }
+    }
+}
 
 /// A finished bag of 6 commands on one topic in `dir` (made afresh), with its metadata.yaml.
 fn small_bag(dir: &Path) -> Result<PathBuf, SetupError> {

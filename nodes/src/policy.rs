@@ -11,7 +11,7 @@ use std::collections::HashSet;
 
 use equiarm_msgs::msg::{GripperCommand, Observation, PolicyWeights, TrainerStatus};
 use equiarm_train::gate::Gate;
-use equiarm_train::policy::{MAX_LOGGED_SENDERS, Policy, WeightsOutcome};
+use equiarm_train::policy::{AnswerError, MAX_LOGGED_SENDERS, Policy, WeightsOutcome};
 use log::{info, warn};
 
 use crate::policy_cli::{PolicyArgs, architecture};
@@ -49,7 +49,14 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
                 gate.on_status(r?.0.updates);
                 gate.release(&policy)
             }
-            r = obs_sub.recv() => gate.offer(r?.0, &policy),
+            r = obs_sub.recv() => {
+                let obs = r?.0;
+                // screened before the gate may hold it (a held good one is not displaced by a bad one)
+                match policy.screen(&obs) {
+                    Ok(()) => gate.offer(obs, &policy),
+                    Err(reason) => { skip(&obs, &reason, (&mut bad, &mut logged)); None }
+                }
+            }
             r = recv_some(weights_sub.as_ref()) => {
                 let (w, _) = r?;
                 let (version, updates, run) = (w.version, w.updates, equiarm_msgs::shown(&w.run_id).into_owned());
@@ -95,17 +102,20 @@ async fn answer(
             Ok(()) => *sent += 1,
             Err(e) => warn!("{e:#}"),
         },
-        Err(reason) => {
-            let ((bad, logged), cause) = (skips, reason.cause());
-            *bad += 1;
-            if logged.len() < MAX_LOGGED_SENDERS && logged.insert((obs.env.clone(), cause)) {
-                let env = equiarm_msgs::shown(&obs.env);
-                warn!(
-                    "skipping Observation seq {} of '{env}': {reason} (further {cause} defects of this env are counted, not logged; {bad} skipped so far)",
-                    obs.seq
-                );
-            }
-        }
+        Err(reason) => skip(&obs, &reason, skips),
+    }
+}
+
+/// Counts a bad Observation, and logs it once per sender and cause.
+fn skip(obs: &Observation, reason: &AnswerError, (bad, logged): (&mut u64, &mut HashSet<(String, &'static str)>)) {
+    let cause = reason.cause();
+    *bad += 1;
+    if logged.len() < MAX_LOGGED_SENDERS && logged.insert((obs.env.clone(), cause)) {
+        let env = equiarm_msgs::shown(&obs.env);
+        warn!(
+            "skipping Observation seq {} of '{env}': {reason} (further {cause} defects of this env are counted, not logged; {bad} skipped so far)",
+            obs.seq
+        );
     }
 }
 

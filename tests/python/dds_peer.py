@@ -14,6 +14,13 @@ the wire. Every loop is bounded in count and time.
                                          episode's terminal frame, which nothing answers, as
                                          "terminal"), every transform on /tf_static and /tf,
                                          until an EpisodeResult
+    dds_peer.py oversized DOMAIN SECONDS [TOPIC] [RATE]
+                                         publish Observations announcing an 8192x8192 frame (each
+                                         plane a valid zstd frame of zeros, about 10 KB on the wire,
+                                         335 MB decompressed) on TOPIC (default rt/env0/observation)
+                                         at RATE Hz (default 10), as env0 with seqs from 2^40 (no
+                                         real frame's) in episode 2^20 (past the expert episodes,
+                                         so a policy decodes the frame)
 """
 
 import json
@@ -197,6 +204,30 @@ def clock(domain: int, seconds: float):
     emit(event="done", ended=ended)
 
 
+def oversized(domain: int, seconds: float, topic: str = "rt/env0/observation", rate: str = "10"):
+    import zstandard
+
+    side = 8192
+    zeros = bytes(side * side * 3)
+    color = zstandard.ZstdCompressor(level=3).compress(zeros)
+    depth = zstandard.ZstdCompressor(level=3).compress(zeros[: side * side * 2])
+    del zeros
+    dp = DomainParticipant(domain)
+    writer = DataWriter(dp, Topic(dp, topic, idl.Observation), qos=RCLPY_DEFAULT)
+    period = 1.0 / float(rate)
+    emit(event="ready", bytes=len(color) + len(depth), decompressed=side * side * 5)
+    deadline = time.monotonic() + seconds
+    n = 0
+    next_t = time.monotonic()
+    while time.monotonic() < deadline:
+        writer.write(idl.Observation(seq=(1 << 40) + n, env="env0", episode=1 << 20, height=side, width=side, color=color, depth=depth))
+        n += 1
+        next_t += period
+        time.sleep(max(0.0, next_t - time.monotonic()))
+    emit(event="sent", count=n, matched=len(writer.get_matched_subscriptions()))
+
+
 if __name__ == "__main__":
     mode, domain, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
-    {"receive": receive, "send": send, "send-bad": send_bad, "clock": clock}[mode](domain, seconds)
+    modes = {"receive": receive, "send": send, "send-bad": send_bad, "clock": clock, "oversized": oversized}
+    modes[mode](domain, seconds, *sys.argv[4:])

@@ -230,7 +230,15 @@ impl Dataset {
                 let (Some(s), Some(e)) = (s, e) else {
                     return Err(bad(format!("pair {i}: chunk runs past the end of the file (truncated?)")));
                 };
-                let raw = zstd::bulk::decompress(&data[s..e], raw_len + 1)
+                let chunk = &data[s..e];
+                // the size the chunk says it holds, before anything is allocated for it
+                match zstd::zstd_safe::get_frame_content_size(chunk) {
+                    Ok(Some(n)) if n == raw_len as u64 => {}
+                    Ok(Some(n)) => return Err(bad(format!("pair {i}: chunk holds {n} bytes, expected {raw_len}"))),
+                    Ok(None) => return Err(bad(format!("pair {i}: damaged chunk: its header does not give its size"))),
+                    Err(_) => return Err(bad(format!("pair {i}: damaged chunk: no zstd frame header"))),
+                }
+                let raw = zstd::bulk::decompress(chunk, raw_len + 1)
                     .map_err(|err| bad(format!("pair {i}: damaged chunk: {err}")))?;
                 if raw.len() != raw_len {
                     return Err(bad(format!("pair {i}: {} bytes, expected {raw_len}", raw.len())));
@@ -247,8 +255,8 @@ impl Dataset {
 }
 
 /// What a header must hold for its pairs to be read (by training, `bound`, everything): one chunk per
-/// pair, each inside the `data_len` bytes after the header, an image size the pairs can have, and
-/// labels and rotations among the 8 angles.
+/// pair, the chunks one after another filling the `data_len` bytes after the header, an image size
+/// the pairs can have, and labels and rotations among the 8 angles.
 fn check_header(header: &Header, data_len: u64) -> std::result::Result<(), String> {
     if header.chunks.len() != header.pairs.len() {
         return Err(format!("{} pairs but {} chunks in the header", header.pairs.len(), header.chunks.len()));
@@ -261,6 +269,18 @@ fn check_header(header: &Header, data_len: u64) -> std::result::Result<(), Strin
     }
     if let Some(i) = header.chunks.iter().position(|c| c.offset.checked_add(c.len).is_none_or(|e| e > data_len)) {
         return Err(format!("pair {i}: chunk runs past the end of the file (truncated?)"));
+    }
+    // The writer puts the chunks one after another; a header pointing many pairs at one small chunk
+    // (which may decompress to 10 MB) would make the reader's memory grow with pairs, not bytes.
+    let mut end = 0;
+    for (i, c) in header.chunks.iter().enumerate() {
+        if c.offset != end {
+            return Err(format!("pair {i}: chunk at byte {} after the header; the previous one ends at {end}", c.offset));
+        }
+        end += c.len;
+    }
+    if end != data_len {
+        return Err(format!("{} bytes after the last chunk", data_len - end));
     }
     Ok(())
 }

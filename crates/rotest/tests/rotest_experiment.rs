@@ -58,10 +58,36 @@ fn dataset_file_round_trips_and_damage_is_reported_naming_the_pair() {
     std::fs::write(&bad, &ok[..ok.len() - 10]).unwrap();
     let e = Dataset::read(&bad, None).unwrap_err().to_string();
     assert!(e.contains("pair 5") && e.contains("truncated"), "{e}");
+    // bytes after the last chunk
+    std::fs::write(&bad, [&ok[..], b"tail"].concat()).unwrap();
+    let e = Dataset::read_header(&bad).unwrap_err().to_string();
+    assert!(e.contains("4 bytes after the last chunk"), "{e}");
     std::fs::write(&bad, b"{\"hello\": 1}").unwrap();
     assert!(Dataset::read(&bad, None).unwrap_err().to_string().contains("not a rotation-estimation dataset"));
     let e = Dataset::read(&dir.join("missing").join(FILE_NAME), None).unwrap_err();
     assert!(matches!(e, RotestError::Io { .. }), "{e}");
+}
+
+/// Issue 61: a header pointing every pair at the same chunk (a small input whose pairs would each
+/// decompress it again) is refused before anything is decompressed.
+#[test]
+fn a_header_reusing_one_chunk_for_many_pairs_is_refused() {
+    let ds = data("none", 8, 3, 4);
+    let dir = scratch("reused_chunk");
+    let path = ds.write(&dir).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let n = u64::from_le_bytes(bytes[12..20].try_into().unwrap()) as usize;
+    let mut header: equiarm_rotest::dataset::Header = serde_json::from_slice(&bytes[20..20 + n]).unwrap();
+    let first = header.chunks[0];
+    header.chunks = vec![first; 3];
+    let json = serde_json::to_vec(&header).unwrap();
+    let body = &bytes[20 + n..];
+    let forged = [&bytes[..12], &(json.len() as u64).to_le_bytes()[..], &json, body].concat();
+    let bad = dir.join("forged.rotest");
+    std::fs::write(&bad, forged).unwrap();
+    for e in [Dataset::read(&bad, None).unwrap_err(), Dataset::read_header(&bad).unwrap_err()] {
+        assert!(e.to_string().contains("pair 1: chunk at byte 0 after the header"), "{e}");
+    }
 }
 
 #[test]
