@@ -78,6 +78,7 @@ def commands(args):
     image = f"{frame}:{size}"
     # the scene the trainer's config names: its sims render that view with those corruptions
     view, corrupt = cfg.get("view", "side"), cfg.get("corruption", "none")
+    arm = cfg.get("arm", "hidden")  # a config without the key was written before the arm was drawn
 
     deterministic = str(args.get("deterministic", "false")).lower() in ("1", "true", "yes")
     # by name, so they are subscribed from the start; each env's observation topic too (a Transition
@@ -106,7 +107,7 @@ def commands(args):
     def pair(ns, env_seed, mode, extra):
         name = ns.strip("/")
         sim = [exe, "sim", "--namespace", ns, "--task", task, "--seed", str(env_seed), "--resolution", str(frame),
-               "--view", view, "--corrupt", corrupt, "--stamp-origin", args.get("stamp_origin", "zero")]
+               "--view", view, "--corrupt", corrupt, "--arm", arm, "--stamp-origin", args.get("stamp_origin", "zero")]
         if ns == EVAL_NAMESPACE:
             sim.append("--eval")  # its EpisodeResults are marked as evaluation episodes
         if ns == "/env0":

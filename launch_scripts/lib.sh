@@ -225,12 +225,13 @@ eqa_suite_policies() {
     "${arch[@]}" --seed $((seed * 1000 + 999)) --max-lead 50 --steps-per-update "$rate"
 }
 
-# eqa_scene_args FILE: the sim flags for a training config's camera view and corruptions
-# (`--view V --corrupt C`, the defaults where the config has none), one per line.
+# eqa_scene_args FILE: the sim flags for a training config's camera view, corruptions and arm
+# (`--view V --corrupt C --arm A`, one per line). Where the config has no key: the default view, no
+# corruption, and the arm hidden (a config without `arm` was written before the arm was drawn).
 eqa_scene_args() {
-  local view corrupt
-  view=$(eqa_config_get "$1" view) corrupt=$(eqa_config_get "$1" corruption)
-  printf '%s\n' --view "${view:-side}" --corrupt "${corrupt:-none}"
+  local view corrupt arm
+  view=$(eqa_config_get "$1" view) corrupt=$(eqa_config_get "$1" corruption) arm=$(eqa_config_get "$1" arm)
+  printf '%s\n' --view "${view:-side}" --corrupt "${corrupt:-none}" --arm "${arm:-hidden}"
 }
 
 # eqa_suite_sim I [NAME]: the sim of /envI, started as NAME (default simI), with the config's view and

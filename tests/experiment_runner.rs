@@ -60,8 +60,9 @@ fn a_killed_grid_resumes_to_the_same_updates_and_reports() {
             .arg(&reports);
         c
     };
-    let equi = runs.join("block_pulling/equi/side/none/s3");
-    let cnn = runs.join("block_pulling/cnn/side/none/s3");
+    // (the preset's scene, the arm in view: `-arm` in the VIEW part of the path)
+    let equi = runs.join("block_pulling/equi/side-arm/none/s3");
+    let cnn = runs.join("block_pulling/cnn/side-arm/none/s3");
 
     // Start, and kill the runner once a run has a checkpoint but has not finished.
     let mut runner = at("run").args(["--parallel", "2"]).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();

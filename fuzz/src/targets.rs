@@ -246,7 +246,8 @@ impl Harness for RotestDataset {
         let header = Dataset::read_header(&self.path);
         match Dataset::read(&self.path, None) {
             Ok(ds) => {
-                let header = header.unwrap_or_else(|e| panic!("read accepts a dataset whose header read_header refuses: {e}"));
+                let header =
+                    header.unwrap_or_else(|e| panic!("read accepts a dataset whose header read_header refuses: {e}"));
                 assert_eq!(header.pairs, ds.header.pairs, "read and read_header give other pairs");
                 assert_eq!(ds.pairs.len(), ds.header.pairs.len(), "one stored pair per header pair");
                 true
@@ -336,6 +337,7 @@ const GRIDS: &[&str] = &[
     include_str!("../../experiments/view_angle.toml"),
     include_str!("../../experiments/reflection.toml"),
     include_str!("../../experiments/bf16_check.toml"),
+    include_str!("../../experiments/arm.toml"),
 ];
 
 struct GridToml;

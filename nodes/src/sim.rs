@@ -42,7 +42,7 @@ use equiarm_msgs::rosgraph_msgs::Clock;
 use equiarm_msgs::tf2_msgs::TFMessage;
 use equiarm_sim::{CameraConfig, EnvConfig};
 use equiarm_train::stepper::{SimStats, StampOrigin, Step, Stepper, tf_gripper, tf_static};
-use equiarm_types::{Corruption, TaskKind, ViewPreset};
+use equiarm_types::{ArmView, Corruption, TaskKind, ViewPreset};
 use log::{debug, info, warn};
 
 use crate::camera::{CATCH_UP_POLL, CameraPublishers};
@@ -68,6 +68,10 @@ pub struct SimArgs {
     /// launch scripts pass on).
     #[arg(long, value_name = "none|NAME,…", help = crate::cli_values::corruption_help())]
     pub corrupt: Option<Corruption>,
+    /// Whether the arm carrying the gripper is drawn (default: the config's, visible; the training
+    /// config's `arm`, which the launch scripts pass on).
+    #[arg(long, value_enum)]
+    pub arm: Option<ArmView>,
     /// Camera elevation above the table plane, degrees in (0, 90] (overrides the preset).
     #[arg(long)]
     pub elevation_deg: Option<f64>,
@@ -122,6 +126,7 @@ pub fn env_config(args: &SimArgs) -> anyhow::Result<EnvConfig> {
     if let Some(c) = args.corrupt {
         cfg.corruption = c;
     }
+    cfg.arm = args.arm.unwrap_or(cfg.arm);
     let cam = &mut cfg.camera;
     cam.elevation_deg = args.elevation_deg.unwrap_or(cam.elevation_deg);
     cam.distance = args.distance.unwrap_or(cam.distance);
@@ -141,8 +146,8 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
     let env_name = namespace.trim_matches('/').to_string();
     let task = cfg.task.name();
     let scene = format!(
-        "camera elevation {}°, {} px, corruption {}",
-        cfg.camera.elevation_deg, cfg.camera.width, cfg.corruption
+        "camera elevation {}°, {} px, corruption {}, arm {}",
+        cfg.camera.elevation_deg, cfg.camera.width, cfg.corruption, cfg.arm
     );
     let origin = args.stamp_origin.nanos(|| {
         let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
@@ -255,9 +260,11 @@ pub fn snapshot(
     seed: u64,
     steps: u32,
     view: Option<ViewPreset>,
+    arm: Option<ArmView>,
     out: &Path,
 ) -> anyhow::Result<Vec<PathBuf>> {
     let mut cfg = EnvConfig::new(task);
+    cfg.arm = arm.unwrap_or(cfg.arm);
     if let Some(v) = view {
         cfg.camera = CameraConfig::from(v);
     }

@@ -57,7 +57,8 @@ class EquiArmEnv(gymnasium.Env):
 
     Arguments: ``image_size`` (pixels of the square frames, 152 in the paper), ``view`` (a camera
     preset, ``equiarm.VIEWS``), ``corruption`` (``"none"`` or a comma-separated set of
-    ``equiarm.CORRUPTIONS``), ``max_steps`` (the episode limit; the task's, 50, by default),
+    ``equiarm.CORRUPTIONS``), ``arm`` (``"visible"``: the arm carrying the gripper is drawn, as in
+    the paper; ``"hidden"``: the gripper floats), ``max_steps`` (the episode limit; the task's, 50, by default),
     ``seed`` (the episodes' seeds until ``reset(seed=...)`` gives another), ``render_mode``
     (``None`` or ``"rgb_array"``: ``render()`` returns the last colour frame).
     """
@@ -71,6 +72,7 @@ class EquiArmEnv(gymnasium.Env):
         image_size: int = 152,
         view: str = "side",
         corruption: str = "none",
+        arm: str = "visible",
         max_steps: int | None = None,
         seed: int = 0,
         render_mode: str | None = None,
@@ -82,6 +84,7 @@ class EquiArmEnv(gymnasium.Env):
             image_size=image_size,
             view=view,
             corruption=corruption,
+            arm=arm,
             max_steps=max_steps,
             seed=seed,
             units="normalized",

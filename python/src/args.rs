@@ -4,7 +4,7 @@
 use std::str::FromStr;
 
 use equiarm_sim::{CameraConfig, EnvConfig};
-use equiarm_types::{ACTION_DIM, Action, Corruption, TaskKind, ViewPreset};
+use equiarm_types::{ACTION_DIM, Action, ArmView, Corruption, TaskKind, ViewPreset};
 use numpy::{PyArrayDescrMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -28,12 +28,14 @@ pub fn env_config(
     image_size: usize,
     view: &str,
     corruption: &str,
+    arm: &str,
     max_steps: Option<u32>,
     render: bool,
 ) -> PyResult<EnvConfig> {
     let task: TaskKind = parse(task, "task")?;
     let view: ViewPreset = parse(view, "view")?;
     let corruption: Corruption = parse(corruption, "corruption")?;
+    let arm: ArmView = parse(arm, "arm")?;
     if !(1..=MAX_IMAGE_SIZE).contains(&image_size) {
         return Err(PyValueError::new_err(format!("image_size: {image_size} must be 1..={MAX_IMAGE_SIZE} pixels")));
     }
@@ -49,6 +51,7 @@ pub fn env_config(
     cfg.camera = CameraConfig::from(view);
     (cfg.camera.width, cfg.camera.height) = (image_size, image_size);
     cfg.corruption = corruption;
+    cfg.arm = arm;
     cfg.max_steps = max_steps;
     cfg.render = render;
     Ok(cfg)

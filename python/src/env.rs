@@ -137,20 +137,21 @@ pub struct SimEnv {
 impl SimEnv {
     /// An env of `task`; see `equiarm.make` for the arguments.
     #[new]
-    #[pyo3(signature = (task, *, image_size=152, view="side", corruption="none", max_steps=None, render=true, seed=0, units="normalized"))]
+    #[pyo3(signature = (task, *, image_size=152, view="side", corruption="none", arm="visible", max_steps=None, render=true, seed=0, units="normalized"))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         task: &str,
         image_size: usize,
         view: &str,
         corruption: &str,
+        arm: &str,
         max_steps: Option<u32>,
         render: bool,
         seed: u64,
         units: &str,
     ) -> PyResult<Self> {
         guard(|| {
-            let config = args::env_config(task, image_size, view, corruption, max_steps, render)?;
+            let config = args::env_config(task, image_size, view, corruption, arm, max_steps, render)?;
             let units = Units::parse(units)?;
             let env = Env::new(config.clone()).map_err(|e| sim_error(e, ""))?;
             Ok(SimEnv { slot: Mutex::new(Slot::new(env, seed)), units, config })
@@ -276,7 +277,7 @@ impl SimVecEnv {
 impl SimVecEnv {
     /// `n` envs of `task`; see `equiarm.make_vec` for the arguments.
     #[new]
-    #[pyo3(signature = (task, n, *, image_size=152, view="side", corruption="none", max_steps=None, render=true, seed=0, units="normalized"))]
+    #[pyo3(signature = (task, n, *, image_size=152, view="side", corruption="none", arm="visible", max_steps=None, render=true, seed=0, units="normalized"))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         task: &str,
@@ -284,6 +285,7 @@ impl SimVecEnv {
         image_size: usize,
         view: &str,
         corruption: &str,
+        arm: &str,
         max_steps: Option<u32>,
         render: bool,
         seed: u64,
@@ -293,7 +295,7 @@ impl SimVecEnv {
             if n == 0 {
                 return Err(PyValueError::new_err("n: the number of envs must be at least 1"));
             }
-            let config = args::env_config(task, image_size, view, corruption, max_steps, render)?;
+            let config = args::env_config(task, image_size, view, corruption, arm, max_steps, render)?;
             let units = Units::parse(units)?;
             let envs = VecEnv::new(config.clone(), n).map_err(|e| sim_error(e, ""))?.envs;
             let slots = envs.into_iter().enumerate().map(|(k, e)| Slot::new(e, seed.wrapping_add(k as u64))).collect();

@@ -109,7 +109,7 @@ fn episode_seed(seed: u64, env: u32, episode: u64) -> u64 {
 #[pyfunction]
 fn bench_rust_steps(py: Python<'_>, task: &str, image_size: usize, steps: usize, seed: u64) -> PyResult<Vec<f64>> {
     guard(|| {
-        let cfg = args::env_config(task, image_size, "side", "none", None, true)?;
+        let cfg = args::env_config(task, image_size, "side", "none", "visible", None, true)?;
         py.detach(|| {
             let fail = |e: equiarm_sim::SimError| PyRuntimeError::new_err(e.to_string());
             let mut env = equiarm_sim::Env::new(cfg).map_err(fail)?;

@@ -69,3 +69,15 @@ def test_single_runner_layouts_and_depth_only_view():
     (holding, in_hand, obs), reward, done = env.step(env.getNextAction())
     assert isinstance(reward, float) and isinstance(done, bool) and obs.shape == (1, 24, 24)
     assert env.getStepsLeft() == 49
+
+
+def test_trans_robot_hides_the_arm():
+    def first_channel(trans):
+        env = env_factory.createEnvs(0, "close_loop_block_picking", {"obs_size": 64, "seed": 2, "trans_robot": trans})
+        return env.reset()[2][0]
+
+    shown, hidden = first_channel(False), first_channel(True)
+    changed = (shown != hidden).mean()
+    assert 0.005 < changed < 0.5, changed  # the arm's pixels, in the top part of the image
+    with pytest.raises(TypeError, match="trans_robot"):
+        env_factory.createEnvs(0, "close_loop_block_picking", {"trans_robot": "yes"})

@@ -69,6 +69,16 @@ def test_views_and_corruptions_come_from_the_rust_types():
     assert obs["color"].shape == (32, 32, 3)
 
 
+def test_the_arm_is_drawn_unless_hidden():
+    shown, _ = equiarm.make("block_picking", image_size=64).reset(seed=0)
+    hidden, _ = equiarm.make("block_picking", image_size=64, arm="hidden").reset(seed=0)
+    changed = np.any(shown["color"] != hidden["color"], axis=-1)
+    assert 0.005 < changed.mean() < 0.5, changed.mean()
+    assert changed[:32].sum() > changed[32:].sum(), "the arm comes in from the top of the image"
+    with pytest.raises(ValueError, match="arm: "):
+        equiarm.make("block_picking", arm="transparent")
+
+
 def _reference(task, n, seed, **kw):
     # Gymnasium's own vector env of single equiarm envs with the seeds make_vec gives env k.
     return SyncVectorEnv([lambda k=k: equiarm.make(task, seed=seed + k, **kw) for k in range(n)])

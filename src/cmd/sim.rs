@@ -35,14 +35,17 @@ enum SimSubcommand {
         /// Camera preset.
         #[arg(long, value_enum)]
         view: Option<equiarm_types::ViewPreset>,
+        /// Whether the arm carrying the gripper is drawn (default visible).
+        #[arg(long, value_enum)]
+        arm: Option<equiarm_types::ArmView>,
     },
 }
 
 /// Runs `equiarm sim`: the node until SIGINT/SIGTERM, or a snapshot.
 pub fn run(c: SimCommand) -> anyhow::Result<ExitCode> {
     match c.sub {
-        Some(SimSubcommand::Snapshot { task, out, seed, steps, view }) => {
-            for f in equiarm_nodes::sim::snapshot(task, seed, steps, view, &out)? {
+        Some(SimSubcommand::Snapshot { task, out, seed, steps, view, arm }) => {
+            for f in equiarm_nodes::sim::snapshot(task, seed, steps, view, arm, &out)? {
                 println!("{}", f.display());
             }
         }

@@ -317,7 +317,7 @@ def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
         assert sim[1] == "sim" and _flag(sim, "--namespace") == ns and _flag(sim, "--task") == "block_picking"
         assert _flag(sim, "--seed") == str(seed) and _flag(sim, "--resolution") == str(frame)
         assert ("--eval" in sim) == (ns == "/eval")
-        assert (_flag(sim, "--view"), _flag(sim, "--corrupt")) == ("side", "none")
+        assert (_flag(sim, "--view"), _flag(sim, "--corrupt"), _flag(sim, "--arm")) == ("side", "none", "visible")
         assert ("--clock" in sim) == (ns == "/env0"), "exactly one sim publishes /clock"
         origins.add(_flag(sim, "--stamp-origin"))
         assert pol[1] == "policy" and _flag(pol, "--namespace") == ns
@@ -349,7 +349,7 @@ def test_launch_file_paper_preset_and_config_file(launch_file, tmp_path):
         f"{paper['image_size']}:{paper['agent']['input_size']}"
     assert "--total-updates" not in procs["trainer"].kwargs["cmd"]
     cfg = dict(paper, image_size=100, agent=dict(paper["agent"], input_size=90, hidden=8, model="cnn"),
-               view="angle30", corruption="random_reflection,gripper_only")
+               view="angle30", corruption="random_reflection,gripper_only", arm="hidden")
     f = tmp_path / "mine.json"
     f.write_text(json.dumps(cfg))
     _, procs = launch_file(config=str(f), num_envs="2", model="sen")
@@ -360,8 +360,13 @@ def test_launch_file_paper_preset_and_config_file(launch_file, tmp_path):
     sims = [p.kwargs["cmd"] for name, p in procs.items() if name.startswith("sim_")]
     assert len(sims) == 3
     # the sims render the config's scene, or the trainer learns from another camera than it was told
-    assert all((_flag(s, "--view"), _flag(s, "--corrupt")) == ("angle30", "random_reflection,gripper_only")
-               for s in sims)
+    assert all((_flag(s, "--view"), _flag(s, "--corrupt"), _flag(s, "--arm")) ==
+               ("angle30", "random_reflection,gripper_only", "hidden") for s in sims)
+    # a config written before the arm was drawn has no `arm`: its scene had none
+    del cfg["arm"]
+    f.write_text(json.dumps(cfg))
+    _, procs = launch_file(config=str(f), num_envs="1")
+    assert all(_flag(p.kwargs["cmd"], "--arm") == "hidden" for name, p in procs.items() if name.startswith("sim_"))
 
 
 def test_launch_scripts_compile():

@@ -28,7 +28,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use equiarm_sac::config::{Preset, TrainConfig};
-use equiarm_types::{Augmentation, Corruption, ModelKind, TaskKind, ViewPreset};
+use equiarm_types::{ArmView, Augmentation, Corruption, ModelKind, TaskKind, ViewPreset};
 use serde::Deserialize;
 
 use crate::error::{ExperimentError, Result};
@@ -117,22 +117,33 @@ pub struct Cell {
     pub view: ViewPreset,
     /// Corruption setting.
     pub corruption: Corruption,
+    /// Whether the arm is in view (the grid's `[config] arm`; one value per grid).
+    pub arm: ArmView,
     /// Seed.
     pub seed: u64,
 }
 
 impl Cell {
     /// The run directory below the experiment's: `TASK/VARIANT/VIEW/CORRUPTION/sSEED` (commas of
-    /// the corruption written as `+`).
+    /// the corruption written as `+`; VIEW is the view's name, with `-arm` after it when the arm is in
+    /// view, so that runs of the two scenes never share a directory).
     pub fn rel_dir(&self) -> PathBuf {
         let corruption = self.corruption.to_string().replace(',', "+");
-        [self.task.name(), &self.variant, self.view.name(), &corruption, &format!("s{}", self.seed)].iter().collect()
+        [self.task.name(), &self.variant, &self.scene_view(), &corruption, &format!("s{}", self.seed)].iter().collect()
+    }
+
+    /// The view's name, with `-arm` when the arm is in view (the run directory's VIEW part).
+    pub fn scene_view(&self) -> String {
+        match self.arm {
+            ArmView::Hidden => self.view.name().to_string(),
+            ArmView::Visible => format!("{}-arm", self.view.name()),
+        }
     }
 
     /// The group a report draws as one curve of one figure: everything but the seed, by name (so
     /// groups sort as their names do).
     pub fn group(&self) -> (String, String, String, String) {
-        (self.task.to_string(), self.view.to_string(), self.corruption.to_string(), self.variant.clone())
+        (self.task.to_string(), self.scene_view(), self.corruption.to_string(), self.variant.clone())
     }
 }
 
@@ -211,13 +222,18 @@ impl Grid {
             return Err(bad(format!("checkpoint_minutes: {} must be a positive number", f.checkpoint_minutes)));
         }
         let overrides = serde_json::to_value(&f.config).map_err(|e| bad(format!("config: {e}")))?;
+        // the scene of every run: the preset's (the arm in view) unless `[config]` says otherwise
+        let arm = match overrides.get("arm") {
+            Some(v) => serde_json::from_value(v.clone()).map_err(|e| bad(format!("config: arm: {e}")))?,
+            None => TrainConfig::preset(preset, TaskKind::BlockPulling).arm,
+        };
         let mut cells = Vec::new();
         for &task in &f.tasks {
             for variant in &f.variants {
                 for &view in &f.views {
                     for &corruption in corruptions {
                         for &seed in &f.seeds {
-                            cells.push(Cell { task, variant: variant.clone(), view, corruption, seed });
+                            cells.push(Cell { task, variant: variant.clone(), view, corruption, arm, seed });
                         }
                     }
                 }
@@ -294,6 +310,7 @@ impl Grid {
         cfg.augmentation = variant.augmentation;
         cfg.view = cell.view;
         cfg.corruption = cell.corruption;
+        cfg.arm = cell.arm;
         cfg.seed = cell.seed;
         if let Some(&u) = self.updates.get(&cell.task) {
             cfg.total_updates = u;
@@ -341,7 +358,8 @@ mod tests {
         let c = &g.cells()[2];
         assert_eq!((c.task, c.variant.as_str(), c.seed), (TaskKind::BlockPulling, "cnn_drq", 0));
         assert_eq!(c.corruption.to_string(), "random_reflection,gripper_only");
-        assert_eq!(c.rel_dir(), PathBuf::from("block_pulling/cnn_drq/side/random_reflection+gripper_only/s0"));
+        // the preset's scene has the arm in view: the VIEW part says so
+        assert_eq!(c.rel_dir(), PathBuf::from("block_pulling/cnn_drq/side-arm/random_reflection+gripper_only/s0"));
         let cfg = g.config(c).unwrap();
         assert_eq!((cfg.eval_every, cfg.agent.hidden, cfg.seed), (50, 8, 0));
         assert_eq!(cfg.augmentation, Augmentation::Drq { k: 2, m: 2 });
@@ -351,6 +369,11 @@ mod tests {
         // the rest is the preset's
         assert_eq!(cfg.batch_size, TrainConfig::reduced16(TaskKind::BlockPulling).batch_size);
         assert_eq!(g.runs, None, "shared runs directory by default");
+        assert_eq!(cfg.arm, ArmView::Visible);
+        let hidden = parse(&format!("{BASE}[config]\narm = \"hidden\"\n")).unwrap();
+        assert_eq!(hidden.cells()[0].rel_dir(), PathBuf::from("block_pulling/equi/side/none/s0"));
+        assert_eq!(hidden.config(&hidden.cells()[0]).unwrap().arm, ArmView::Hidden);
+        assert!(parse(&format!("{BASE}[config]\narm = \"glass\"\n")).unwrap_err().to_string().contains("arm"));
         assert!(cfg.agent.matmul.is_f32());
         let own = parse(&format!("{BASE}runs = \"runs/own\"\n[config]\nagent = {{ matmul = \"bf16\" }}\n")).unwrap();
         assert_eq!(own.runs, Some(PathBuf::from("runs/own")));
@@ -366,10 +389,10 @@ mod tests {
         assert_eq!(
             names(&cnn),
             [
-                "block_pulling/cnn_drq/side/none/s0",
-                "block_pulling/cnn_drq/side/none/s1",
-                "block_in_bowl/cnn_drq/side/none/s0",
-                "block_in_bowl/cnn_drq/side/none/s1"
+                "block_pulling/cnn_drq/side-arm/none/s0",
+                "block_pulling/cnn_drq/side-arm/none/s1",
+                "block_in_bowl/cnn_drq/side-arm/none/s0",
+                "block_in_bowl/cnn_drq/side-arm/none/s1"
             ]
         );
         // several patterns: the union, in file order; `*` stays within one part of the path
@@ -377,9 +400,9 @@ mod tests {
         assert_eq!(
             names(&two),
             [
-                "block_pulling/equi/side/none/s0",
-                "block_pulling/cnn_drq/side/none/s0",
-                "block_in_bowl/equi/side/none/s1"
+                "block_pulling/equi/side-arm/none/s0",
+                "block_pulling/cnn_drq/side-arm/none/s0",
+                "block_in_bowl/equi/side-arm/none/s1"
             ]
         );
         for (pattern, says) in

@@ -160,6 +160,7 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
             .push(v);
     }
     let mut md = format!("# Experiment `{}`\n\n{}\n\n", grid.name, grid.description.trim());
+    md += &format!("Scene: {}.\n\n", scene_of(grid, out));
     md += &format!(
         "Regenerate this page from the run directories with `{command}`. Grid: [`{}`]({}). Base preset `{}`; \
          every run is one `equiarm train --in-process` run at one thread. Success rate and discounted return \
@@ -208,6 +209,7 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
             );
         }
     }
+    md += &params_table(grid)?;
     let unfinished: Vec<String> = views
         .iter()
         .filter(|v| v.result.is_none())
@@ -421,6 +423,51 @@ pub fn all_finished(grid: &Grid, runs: &Path, archive: &Archive) -> Result<bool>
     Ok(true)
 }
 
+/// The networks' sizes of each variant of `grid` (its first task's config; the sizes do not depend
+/// on the task): the paper matched them across models, so a comparison is only fair as far as they match.
+fn params_table(grid: &Grid) -> Result<String> {
+    let mut md = "\nTrainable parameters of each variant's networks (actor; critic, both Q heads), as the grid builds \
+                  them:\n\n| variant | actor | critic | actor / Equi SAC's |\n|---|---|---|---|\n"
+        .to_string();
+    let mut seen = Vec::new();
+    let mut rows = Vec::new();
+    for c in grid.cells() {
+        if seen.contains(&c.variant) {
+            continue;
+        }
+        seen.push(c.variant.clone());
+        let cfg = grid.config(c)?;
+        let agent = equiarm_sac::agent::Agent::new(cfg.agent.clone(), 0)
+            .map_err(|e| ExperimentError::Grid { path: grid.path.clone(), message: format!("{}: {e}", c.variant) })?;
+        let label = VARIANTS.iter().find(|v| v.name == c.variant).map_or(c.variant.as_str(), |v| v.label);
+        rows.push((label.to_string(), cfg.agent.model, agent.param_counts()));
+    }
+    let equi = rows.iter().find(|r| r.1 == equiarm_types::ModelKind::Equi).map(|r| r.2.0);
+    for (label, _, (actor, critic)) in &rows {
+        let ratio = equi.map_or("–".to_string(), |e| format!("{:.2}", *actor as f64 / e as f64));
+        md += &format!("| {label} | {actor} | {critic} | {ratio} |\n");
+    }
+    Ok(md)
+}
+
+/// Which scene a grid's runs used: the arm in view or not, and the floor (docs/arm.md).
+fn scene_of(grid: &Grid, out: &Path) -> String {
+    use equiarm_types::ArmView;
+    let arms: std::collections::BTreeSet<ArmView> = grid.cells().iter().map(|c| c.arm).collect();
+    let gripper_only = grid.cells().iter().all(|c| c.corruption.gripper_only);
+    let arm = match arms.iter().collect::<Vec<_>>()[..] {
+        [ArmView::Visible] if gripper_only => "the arm hidden by the gripper-only scene",
+        [ArmView::Visible] => "the arm that carries the gripper in view (the paper's scene)",
+        [ArmView::Hidden] => {
+            "the arm hidden (a floating gripper: the scene before the arm was drawn, kept so that new seeds stay comparable with the archived ones)"
+        }
+        _ => "runs with and without the arm (the VIEW part of a run's path ends in `-arm` where it is in view)",
+    };
+    let floor = if gripper_only { "a plain floor" } else { "the tiled floor" };
+    let root = grid.path.parent().and_then(Path::parent).unwrap_or(Path::new(""));
+    format!("{arm}; {floor} ([docs/arm.md]({}))", relative_link(out, &root.join("docs/arm.md")))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -433,6 +480,7 @@ mod tests {
             variant: "equi".into(),
             view: ViewPreset::Side,
             corruption: Corruption::NONE,
+            arm: equiarm_types::ArmView::Hidden,
             seed: 0,
         };
         let f32_cfg = TrainConfig::reduced16(TaskKind::BlockPulling);
@@ -475,6 +523,7 @@ mod tests {
                 variant: variant.into(),
                 view: view.parse().unwrap(),
                 corruption: "gripper_only".parse().unwrap(),
+                arm: equiarm_types::ArmView::Hidden,
                 seed,
             },
             evals: Vec::new(),

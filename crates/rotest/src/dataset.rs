@@ -275,7 +275,10 @@ fn check_header(header: &Header, data_len: u64) -> std::result::Result<(), Strin
     let mut end = 0;
     for (i, c) in header.chunks.iter().enumerate() {
         if c.offset != end {
-            return Err(format!("pair {i}: chunk at byte {} after the header; the previous one ends at {end}", c.offset));
+            return Err(format!(
+                "pair {i}: chunk at byte {} after the header; the previous one ends at {end}",
+                c.offset
+            ));
         }
         end += c.len;
     }

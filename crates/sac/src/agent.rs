@@ -727,6 +727,11 @@ impl<A: ActorNet<C>, C: CriticNet> Sac<A, C> {
         &self.actor
     }
 
+    /// Trainable parameters of the actor and of one critic (both Q heads; the target is a copy).
+    pub fn param_counts(&self) -> (usize, usize) {
+        (self.actor.num_params(), self.critic.num_params())
+    }
+
     /// Replace the actor's weights with those in a safetensors file (policy nodes).
     pub fn load_actor(&mut self, path: &Path) -> Result<(), AgentError> {
         let actor = self.actor.clone();
@@ -890,6 +895,11 @@ impl Agent {
     /// See [`Sac::needs_curl_pretraining`].
     pub fn needs_curl_pretraining(&self) -> bool {
         each!(self, a => a.needs_curl_pretraining())
+    }
+
+    /// See [`Sac::param_counts`].
+    pub fn param_counts(&self) -> (usize, usize) {
+        each!(self, a => a.param_counts())
     }
 
     /// See [`Sac::set_curl_pretrained`].

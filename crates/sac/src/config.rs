@@ -25,7 +25,7 @@ pub struct ConfigError {
 }
 
 pub use equiarm_types::Augmentation;
-use equiarm_types::{Corruption, TaskKind, ViewPreset};
+use equiarm_types::{ArmView, Corruption, TaskKind, ViewPreset};
 
 /// Largest frame side accepted (pixels): the replay's frame store refuses larger ones.
 pub const MAX_IMAGE_SIZE: usize = crate::frame::StoredFrame::MAX_SIZE;
@@ -90,6 +90,10 @@ pub struct TrainConfig {
     pub view: ViewPreset,
     /// Symmetry corruptions of the observations (docs/paper.md §5): `none` or a comma-separated set.
     pub corruption: Corruption,
+    /// Whether the arm carrying the gripper is in view (`visible` in every preset, as in the paper).
+    /// A config without the key ran before the arm existed, so it reads as `hidden`.
+    #[serde(default = "arm_of_configs_before_it")]
+    pub arm: ArmView,
     /// Rendered frame size in pixels (paper 152); the networks see `agent.input_size` crops.
     pub image_size: usize,
     /// SAC and network settings.
@@ -124,6 +128,11 @@ pub struct TrainConfig {
     pub seed: u64,
 }
 
+/// A config without `arm` ran before the arm was drawn: hidden.
+fn arm_of_configs_before_it() -> ArmView {
+    ArmView::Hidden
+}
+
 impl Default for TrainConfig {
     fn default() -> Self {
         TrainConfig::paper(TaskKind::BlockPulling)
@@ -138,6 +147,7 @@ impl TrainConfig {
             task,
             view: ViewPreset::Side,
             corruption: Corruption::NONE,
+            arm: ArmView::Visible,
             image_size: 152,
             agent: AgentConfig::default(),
             replay: ReplayConfig::default(),

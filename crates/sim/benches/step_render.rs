@@ -7,13 +7,16 @@
 //!
 //! Our step: the expert's action, physics (20 substeps at 1/120 s, plus grip substeps when the jaw
 //! command changes), holding/success tests, the expert planner, and a 152×152 colour + depth +
-//! segmentation raster, single thread. Episodes are reset (not timed) when done.
+//! segmentation raster, single thread. Episodes are reset (not timed) when done. The table is for
+//! the default scene (the arm in view); the same steps with the arm hidden are measured in the same
+//! rounds, and the arm's cost per step is printed as their ratio (issue 58 goal: at most +30 %).
 
 use std::path::PathBuf;
 use std::process::Command;
 use std::time::Instant;
 
 use clap::Parser;
+use equiarm_sim::env::ArmView;
 use equiarm_sim::{Action, Env, EnvConfig, TaskKind, VecEnv};
 
 fn pct(xs: &mut [f64], q: f64) -> f64 {
@@ -27,11 +30,12 @@ struct Stats {
     render: Vec<f64>,
 }
 
-fn measure(task: TaskKind, steps: usize, seed0: u64) -> Stats {
+fn measure(task: TaskKind, steps: usize, seed0: u64, arm: ArmView) -> Stats {
     let mut st = Stats { step: Vec::new(), physics: Vec::new(), render: Vec::new() };
     for render in [true, false] {
         let mut cfg = EnvConfig::new(task);
         cfg.render = render;
+        cfg.arm = arm;
         let mut env = Env::new(cfg).expect("env");
         let mut seed = seed0;
         let mut obs = env.reset(seed).expect("reset");
@@ -103,10 +107,12 @@ fn main() {
     let mut ours: Vec<Vec<f64>> = vec![Vec::new(); TaskKind::ALL.len()];
     let mut phys: Vec<Vec<f64>> = vec![Vec::new(); TaskKind::ALL.len()];
     let mut rend: Vec<Vec<f64>> = vec![Vec::new(); TaskKind::ALL.len()];
+    let mut hidden: Vec<Vec<f64>> = vec![Vec::new(); TaskKind::ALL.len()];
     let mut peers: Vec<(String, (f64, f64, f64, f64))> = Vec::new();
     for round in 0..rounds {
         for (k, task) in TaskKind::ALL.into_iter().enumerate() {
-            let s = measure(task, steps, 1000 * round as u64);
+            let s = measure(task, steps, 1000 * round as u64, ArmView::Visible);
+            hidden[k].extend(measure(task, steps, 1000 * round as u64, ArmView::Hidden).step);
             ours[k].extend(s.step);
             phys[k].extend(s.physics);
             rend[k].extend(s.render);
@@ -137,6 +143,15 @@ fn main() {
     }
     let our_med = pct(&mut all, 0.5);
     println!("{:<16} {:>12.3} {:>10.3}", "all tasks", our_med, pct(&mut all, 0.95));
+    println!("\nthe arm's cost: step median with the arm hidden, in view, ratio (same rounds)");
+    let mut all_hidden = Vec::new();
+    for (k, task) in TaskKind::ALL.into_iter().enumerate() {
+        all_hidden.extend_from_slice(&hidden[k]);
+        let (h, v) = (pct(&mut hidden[k], 0.5), pct(&mut ours[k], 0.5));
+        println!("{:<16} {:>12.3} {:>10.3} {:>8.3}", task.name(), h, v, v / h);
+    }
+    let h = pct(&mut all_hidden, 0.5);
+    println!("{:<16} {:>12.3} {:>10.3} {:>8.3}", "all tasks", h, our_med, our_med / h);
 
     // Throughput of VecEnv (one rayon task per env), block picking, expert actions, images on.
     let n_envs = args.envs as usize;

@@ -1,4 +1,5 @@
-//! URDF assets: the gripper, cube, flat block, table, drawer cabinet and bowl of the paper's tasks.
+//! URDF assets: the gripper, cube, flat block, table, drawer cabinet and bowl of the paper's tasks,
+//! and the 7-DoF arm that carries the gripper in view.
 //!
 //! Each file is read once, parsed with the urdf-rs that `rapier3d-urdf` re-exports, validated, and kept
 //! as a [`urdf_rs::Robot`]; every reset builds fresh rapier bodies from it with
@@ -32,17 +33,20 @@ pub enum AssetKind {
     Drawer,
     /// `bowl.urdf`: the box-built bowl of block in bowl (rim about 0.155 m across, 0.063 m tall).
     Bowl,
+    /// `arm.urdf`: the 7-DoF arm drawn carrying the gripper (seen, not simulated; [`crate::arm`]).
+    Arm,
 }
 
 impl AssetKind {
     /// Every asset kind, each once.
-    pub const ALL: [AssetKind; 6] = [
+    pub const ALL: [AssetKind; 7] = [
         AssetKind::Gripper,
         AssetKind::Cube,
         AssetKind::FlatBlock,
         AssetKind::Table,
         AssetKind::Drawer,
         AssetKind::Bowl,
+        AssetKind::Arm,
     ];
 
     /// File name inside the `urdf/` directory.
@@ -54,10 +58,11 @@ impl AssetKind {
             AssetKind::Table => "table.urdf",
             AssetKind::Drawer => "drawer.urdf",
             AssetKind::Bowl => "bowl.urdf",
+            AssetKind::Arm => "arm.urdf",
         }
     }
 
-    fn bundled_text(self) -> &'static str {
+    pub(crate) fn bundled_text(self) -> &'static str {
         match self {
             AssetKind::Gripper => include_str!("../../../urdf/gripper.urdf"),
             AssetKind::Cube => include_str!("../../../urdf/cube.urdf"),
@@ -65,6 +70,7 @@ impl AssetKind {
             AssetKind::Table => include_str!("../../../urdf/table.urdf"),
             AssetKind::Drawer => include_str!("../../../urdf/drawer.urdf"),
             AssetKind::Bowl => include_str!("../../../urdf/bowl.urdf"),
+            AssetKind::Arm => include_str!("../../../urdf/arm.urdf"),
         }
     }
 }
@@ -139,6 +145,7 @@ impl Assets {
         d.link_index("drawer")?;
         d.link_index("handle")?;
         d.joint_index("drawer_joint")?;
+        crate::arm::Chain::of(a.get(AssetKind::Arm))?;
         Ok(a)
     }
 

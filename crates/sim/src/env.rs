@@ -7,13 +7,15 @@
 //! seed; parallel stepping runs each env on one thread, so the thread count does not matter.
 //!
 //! Symmetry corruptions ([`Corruption`], docs/paper.md §5): random reflection of every observation, the
-//! single-camera orthographic occlusion projection, and the gripper-only scene (no checker floor).
+//! single-camera orthographic occlusion projection, and the gripper-only scene (no checker floor, no
+//! arm). The arm that carries the gripper is drawn unless [`EnvConfig::arm`] hides it ([`crate::arm`]).
 
 use std::sync::Arc;
 
 use rapier3d::prelude::*;
 use rayon::prelude::*;
 
+use crate::arm::Arm;
 use crate::assets::Assets;
 use crate::camera::{Camera, CameraConfig};
 use crate::error::{Result, SimError};
@@ -23,7 +25,7 @@ use crate::rng::Rng;
 use crate::tasks::{RESET_TCP, TaskKind, TaskState};
 use crate::world::{Scene, SimParams};
 
-pub use equiarm_types::Corruption;
+pub use equiarm_types::{ArmView, Corruption};
 
 /// Largest episode step limit accepted (the paper's is 50).
 pub const MAX_EPISODE_STEPS: u32 = 10_000;
@@ -41,6 +43,9 @@ pub struct EnvConfig {
     pub params: SimParams,
     /// Symmetry corruptions of the observations (default: none).
     pub corruption: Corruption,
+    /// Whether the arm carrying the gripper is drawn (default: visible, as in the paper; the
+    /// gripper-only corruption hides it whatever this says).
+    pub arm: ArmView,
     /// Episode length limit (50 for every task in the paper).
     pub max_steps: u32,
     /// Render images. With `false`, observations carry empty image buffers (for planner runs).
@@ -54,14 +59,15 @@ impl Default for EnvConfig {
 }
 
 impl EnvConfig {
-    /// The paper's setup of `task`: default camera and physics, no corruption, 50 steps per episode,
-    /// images rendered.
+    /// The paper's setup of `task`: default camera and physics, no corruption, the arm in view, 50
+    /// steps per episode, images rendered.
     pub fn new(task: TaskKind) -> Self {
         Self {
             task,
             camera: CameraConfig::default(),
             params: SimParams::default(),
             corruption: Corruption::default(),
+            arm: ArmView::Visible,
             max_steps: 50,
             render: true,
         }
@@ -122,6 +128,7 @@ pub struct StepResult {
 struct Episode {
     scene: Scene,
     gripper: Gripper,
+    arm: Option<Arm>,
     task: TaskState,
     meshes: MeshCache,
     steps: u32,
@@ -186,6 +193,16 @@ impl Env {
         Some(nalgebra::Isometry3::from_parts(t, nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, g.yaw as f64)))
     }
 
+    /// Whether the scene shows the arm: [`EnvConfig::arm`] visible and not the gripper-only scene.
+    pub fn shows_arm(&self) -> bool {
+        self.config.arm == ArmView::Visible && !self.config.corruption.gripper_only
+    }
+
+    /// The arm's joint angles (rad) after the last reset or step, when it is shown.
+    pub fn arm_joints(&self) -> Option<[f64; crate::arm::JOINTS]> {
+        Some(self.episode.as_ref()?.arm.as_ref()?.ik().q)
+    }
+
     /// Starts a new episode from `seed`.
     pub fn reset(&mut self, seed: u64) -> Result<Observation> {
         let mut rng = Rng::new(seed);
@@ -197,10 +214,13 @@ impl Env {
         for _ in 0..scene.params.reset_settle_substeps {
             scene.step();
         }
+        // last, so that the rest of the scene is built the same with the arm as without it
+        let arm = (self.shows_arm()).then(|| Arm::insert(&mut scene, &self.assets)).transpose()?;
         let meshes = MeshCache::new(&scene);
         self.episode = Some(Episode {
             scene,
             gripper,
+            arm,
             task,
             meshes,
             steps: 0,
@@ -265,6 +285,12 @@ impl Env {
     }
 
     fn observe(&mut self) -> Observation {
+        if let Some(ep) = self.episode.as_mut()
+            && let Some(arm) = ep.arm.as_mut()
+        {
+            let palm = *ep.scene.physics.bodies[ep.gripper.palm].position();
+            arm.follow(&mut ep.scene, &palm);
+        }
         let frame = if self.config.render { self.render() } else { None };
         let corruption = self.config.corruption;
         let (w, h) = (self.camera.width(), self.camera.height());

@@ -17,14 +17,16 @@
 //! ```
 //!
 //! Modules: [`assets`] (URDF files), [`world`] (rapier settings, scene), [`gripper`] (floating
-//! gripper, action semantics, holding), [`camera`] (intrinsics/extrinsics, presets), [`render`]
+//! gripper, action semantics, holding), [`arm`] (the arm drawn carrying the gripper, its inverse
+//! kinematics), [`camera`] (intrinsics/extrinsics, presets), [`render`]
 //! (rasteriser + ray-cast oracle), [`tasks`] (tasks and expert planners), [`env`](mod@env) (Env / VecEnv),
 //! [`corrupt`] (symmetry corruptions), [`snapshot`] (PNG output), [`rotest`] (the rotation-estimation
 //! experiment's scene, corruptions and pairs).
 //!
-//! Limitations: the gripper floats (no arm, no IK); the bowl is built from boxes; determinism holds
+//! Limitations: the gripper floats (the arm is drawn following it, but exerts no force); the bowl is built from boxes; determinism holds
 //! for one build on one machine (rapier's `enhanced-determinism` is not enabled).
 
+pub mod arm;
 pub mod assets;
 pub mod camera;
 pub mod corrupt;

@@ -251,6 +251,46 @@ fn gripper_only_scene_has_a_plain_floor() {
     assert_eq!(floor_colours(true), 1, "gripper-only: one plain colour");
 }
 
+/// Issue 58: the arm is drawn only. With it and without it the episode is the same (the same
+/// gripper, objects and segmentation ids), and the frames differ exactly where the arm is seen; it
+/// covers part of the image (the paper's top rows) and is gone in the gripper-only scene.
+#[test]
+fn the_arm_changes_the_frames_only_where_it_is_seen() {
+    use equiarm_sim::env::ArmView;
+    for task in [TaskKind::BlockPulling, TaskKind::BlockPicking] {
+        let scene = |arm: ArmView, gripper_only: bool| {
+            let mut cfg = EnvConfig::new(task);
+            cfg.arm = arm;
+            cfg.corruption.gripper_only = gripper_only;
+            let mut env = Env::new(cfg.clone()).unwrap();
+            env.reset(3).unwrap();
+            (run(&cfg, 3, 12), env.segmentation_names().to_vec())
+        };
+        let (with, names) = scene(ArmView::Visible, false);
+        let (without, names_without) = scene(ArmView::Hidden, false);
+        assert_eq!(names[..names_without.len()], names_without[..], "{task}: the other ids are unchanged");
+        assert!(names[names_without.len()..].iter().all(|n| n.starts_with("arm/")), "{names:?}");
+        assert_eq!(with.len(), without.len(), "{task}: the same episode");
+        let mut arm_pixels = 0;
+        for (a, b) in with.iter().zip(&without) {
+            assert_eq!((a.tcp, a.holding, a.expert_action), (b.tcp, b.holding, b.expert_action), "{task}");
+            for i in 0..a.segmentation.len() {
+                let is_arm = names[a.segmentation[i] as usize].starts_with("arm/");
+                arm_pixels += is_arm as usize;
+                let same = a.segmentation[i] == b.segmentation[i]
+                    && a.depth[i] == b.depth[i]
+                    && a.color[i * 3..i * 3 + 3] == b.color[i * 3..i * 3 + 3];
+                assert!(is_arm || same, "{task} step {}: pixel {i} differs outside the arm", a.step);
+            }
+        }
+        let share = arm_pixels as f64 / (with.len() * with[0].segmentation.len()) as f64;
+        assert!(share > 0.01 && share < 0.5, "{task}: the arm covers {share} of the frames");
+        let (gripper_only, names) = scene(ArmView::Visible, true);
+        assert!(!names.iter().any(|n| n.starts_with("arm/")), "{task}: no arm in the gripper-only scene");
+        assert_eq!(gripper_only.len(), without.len());
+    }
+}
+
 #[test]
 fn config_round_trips_through_json_and_rejects_unknown_keys() {
     let mut cfg = EnvConfig::new(TaskKind::DrawerOpening);

@@ -36,6 +36,7 @@ pub fn env_config(cfg: &TrainConfig) -> Result<EnvConfig, TrainError> {
     e.camera.height = cfg.image_size;
     e.max_steps = cfg.max_episode_steps;
     e.corruption = cfg.corruption;
+    e.arm = cfg.arm;
     Ok(e)
 }
 

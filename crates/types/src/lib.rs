@@ -1,7 +1,7 @@
 //! # equiarm_types
 //!
 //! The domain's words as types, defined once for every crate above: the tasks and their per-task
-//! facts ([`TaskKind`]), the camera views ([`ViewPreset`]), the symmetry corruptions
+//! facts ([`TaskKind`]), the camera views ([`ViewPreset`]) and the arm in view ([`ArmView`]), the symmetry corruptions
 //! ([`Corruption`]), the network families ([`ModelKind`]), the augmentations ([`Augmentation`]),
 //! the gripper [`Action`] with its normalisation, and the network input's planes ([`OBS_PLANES`]).
 //!
@@ -30,4 +30,4 @@ pub use model::ModelKind;
 pub use named::ParseError;
 pub use planes::{OBS_PLANES, Plane};
 pub use task::{PAPER_EPISODE_STEPS, TaskKind};
-pub use view::ViewPreset;
+pub use view::{ArmView, ViewPreset};

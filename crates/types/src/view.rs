@@ -36,3 +36,22 @@ impl ViewPreset {
         }
     }
 }
+
+crate::named_enum! {
+    /// Whether the scene shows the 7-DoF arm that carries the gripper (BulletArm's name for a hidden
+    /// arm is a transparent robot). The arm is drawn only; it touches nothing.
+    pub enum ArmView: "arm" {
+        /// Drawn, its joints set by inverse kinematics to follow the gripper: the paper's scene, where
+        /// the arm is one of the three symmetry breakers (camera angle, arm, floor).
+        Visible = "visible",
+        /// Not drawn: the gripper floats (the scene of every run before the arm existed).
+        Hidden = "hidden",
+    }
+}
+
+impl Default for ArmView {
+    /// [`ArmView::Visible`], what the paper shows.
+    fn default() -> Self {
+        ArmView::Visible
+    }
+}

@@ -38,7 +38,7 @@ FIXED = {
     "render": False,
 }
 
-_OWN = {"workspace", "max_steps", "obs_size", "view_type", "seed", "num_objects", "object_scale_range"}
+_OWN = {"workspace", "max_steps", "obs_size", "view_type", "seed", "num_objects", "object_scale_range", "trans_robot"}
 PLANNER_KEYS = {"dpos": _ACTION["max_dpos"], "drot": _ACTION["max_drot"], "random_orientation": True}
 
 
@@ -88,6 +88,11 @@ def env_args(env_type: str, env_config: dict) -> dict:
         args["max_steps"] = _int(cfg["max_steps"], "max_steps")
     if "seed" in cfg:
         args["seed"] = _int(cfg["seed"], "seed")
+    if "trans_robot" in cfg:
+        # the authors' flag for a robot drawn transparent: the arm is hidden, the gripper stays
+        if not isinstance(cfg["trans_robot"], (bool, np.bool_)):
+            raise TypeError(f"env_config['trans_robot']: expected a bool, got {type(cfg['trans_robot']).__name__}")
+        args["arm"] = "hidden" if cfg["trans_robot"] else "visible"
     return args
 
 

@@ -50,6 +50,7 @@ class MultiRunner:
             num_envs,
             image_size=args.get("image_size", 152),
             max_steps=args.get("max_steps"),
+            arm=args.get("arm", "visible"),
             seed=args.get("seed", 0),
             units="physical",
         )
@@ -131,6 +132,7 @@ class SingleRunner:
             args["task"],
             image_size=args.get("image_size", 152),
             max_steps=args.get("max_steps"),
+            arm=args.get("arm", "visible"),
             seed=args.get("seed", 0),
             units="physical",
         )
