@@ -27,16 +27,9 @@ done
 for v in seconds rate; do
   [[ ${!v} =~ ^[1-9][0-9]*$ ]] || { echo "oversized_frames.sh: --$v ${!v}: expected a whole number above 0" >&2; exit 2; }
 done
-if [ -z "${EQA_BENCH_NETNS:-}" ]; then
-  for ns in "unshare -n" "unshare -rn"; do
-    if $ns true 2>/dev/null; then exec $ns env EQA_BENCH_NETNS=1 bash "$0" "${args[@]}"; fi
-  done
-  echo "oversized_frames.sh: cannot create a network namespace; running on the host's interfaces" >&2
-else
-  ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo 2>/dev/null || true
-fi
-export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-62} ROS_LOCALHOST_ONLY=0
 source "$(dirname "$0")/../launch_scripts/lib.sh"
+eqa_private_netns "$0" "${args[@]}"
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-62} ROS_LOCALHOST_ONLY=0
 cd "$(dirname "$0")/.."
 source tests/python_env.sh
 eqa_bin

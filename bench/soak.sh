@@ -30,16 +30,9 @@ for v in duration num_envs ckpt seed; do
   [[ ${!v} =~ ^[0-9]+$ ]] || { echo "soak.sh: --${v/ckpt/checkpoint-every} ${!v}: expected a whole number" >&2; exit 2; }
 done
 [ "$duration" -ge 60 ] || { echo "soak.sh: --duration $duration: at least 60 s (the faults are spread over it)" >&2; exit 2; }
-if [ -z "${EQA_SOAK_NETNS:-}" ]; then
-  for ns in "unshare -n" "unshare -rn"; do
-    if $ns true 2>/dev/null; then exec $ns env EQA_SOAK_NETNS=1 bash "$0" "${args[@]}"; fi
-  done
-  echo "soak.sh: cannot create a network namespace; running on the host's interfaces" >&2
-else
-  ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo 2>/dev/null || true
-fi
-export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-61} ROS_LOCALHOST_ONLY=0
 source "$(dirname "$0")/../launch_scripts/lib.sh"
+eqa_private_netns "$0" "${args[@]}"
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-61} ROS_LOCALHOST_ONLY=0
 cd "$(dirname "$0")/.."
 eqa_bin
 

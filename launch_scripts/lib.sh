@@ -29,6 +29,22 @@ eqa_default_signals() {
 
 eqa_log() { printf '[%s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
 
+# eqa_private_netns SCRIPT ARGS...: runs the script again (once, replacing this process) in a private
+# network namespace (as root, or with unprivileged user namespaces) so that its DDS traffic stays on
+# this machine's loopback; inside it, brings loopback up with multicast. Where no namespace can be
+# made it says so and the script goes on on the host's interfaces. (The benchmarks that start suites.)
+eqa_private_netns() {
+  if [ -z "${EQA_PRIVATE_NETNS:-}" ]; then
+    local ns
+    for ns in "unshare -n" "unshare -rn"; do
+      if $ns true 2>/dev/null; then exec $ns env EQA_PRIVATE_NETNS=1 bash "$@"; fi
+    done
+    eqa_log "$(basename "$1"): cannot create a network namespace; running on the host's interfaces"
+  else
+    ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo 2>/dev/null || true
+  fi
+}
+
 # The build the launch scripts and the test command share (tests/run_all.sh builds the same): the dev
 # profile (dependencies and the hot crates optimised) of every program, as the GPU build (the CPU
 # stays the default device; docs/backends.md), so whichever runs first builds for both.
