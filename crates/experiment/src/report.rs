@@ -164,7 +164,8 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
     md += &format!(
         "Regenerate this page from the run directories with `{command}`. Grid: [`{}`]({}). Base preset `{}`; \
          every run is one `equiarm train --in-process` run at one thread. Success rate and discounted return \
-         (γ = 0.99) of the greedy policy, mean ± standard error over the finished seeds: at the last \
+         (γ = 0.99) of the greedy policy, mean ± standard error over the finished seeds (the mean alone \
+         below three seeds): at the last \
          evaluation during training (its episodes are the same at every evaluation) and over {} held-out \
          episodes of the final weights (episodes no evaluation saw). The paper's figure is its discounted \
          return at the last training step (docs/paper.md §6, read off its plots).\n\n",
@@ -181,10 +182,7 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
             let done: Vec<&RunResult> = runs_of.iter().filter_map(|r| r.result.as_ref()).collect();
             let pick =
                 |f: &dyn Fn(&RunResult) -> Option<f64>| -> Vec<f64> { done.iter().filter_map(|r| f(r)).collect() };
-            let cell = |v: Vec<f64>| {
-                let (m, se) = mean_se(&v);
-                if v.is_empty() { "–".to_string() } else { format!("{m:.2} ± {se:.2}") }
-            };
+            let cell = |v: Vec<f64>| stat(&v);
             let mut per_seed: Vec<(u64, f64)> = runs_of
                 .iter()
                 .filter_map(|r| r.result.as_ref().map(|x| (r.cell.seed, x.heldout.success_rate)))
@@ -231,7 +229,7 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
     if !swept.is_empty() {
         md += "\n## By camera view\n\nHeld-out evaluation of the final weights at each camera elevation, for each task and \
                corruption with finished runs at two or more views: success rate (discounted return), mean ± standard \
-               error over the finished seeds (n).\n\n";
+               error over the finished seeds (n; the mean alone below three seeds).\n\n";
     }
     for ((task, corruption), by_variant) in &swept {
         let mut cols: Vec<(equiarm_types::ViewPreset, f64)> =
@@ -248,9 +246,8 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
             for (view, _) in &cols {
                 match points.iter().find(|p| &p.view == view) {
                     Some(p) => {
-                        let (s, s_se) = mean_se(&p.success);
-                        let (r, r_se) = mean_se(&p.discounted_return);
-                        md += &format!(" {s:.2} ± {s_se:.2} ({r:.2} ± {r_se:.2}; n={}) |", p.success.len());
+                        md +=
+                            &format!(" {} ({}; n={}) |", stat(&p.success), stat(&p.discounted_return), p.success.len());
                     }
                     None => md += " – |",
                 }
@@ -423,6 +420,21 @@ pub fn all_finished(grid: &Grid, runs: &Path, archive: &Archive) -> Result<bool>
     Ok(true)
 }
 
+/// Fewest seeds whose standard error a page prints: from two it says too little (two seeds that
+/// happen to agree print "± 0.00").
+pub const MIN_SEEDS_FOR_SE: usize = 3;
+
+/// A mean over seeds as the pages print it: `m ± se` from [`MIN_SEEDS_FOR_SE`] seeds on, the mean
+/// alone below that (the tables give the seed count beside it), `–` for none.
+fn stat(v: &[f64]) -> String {
+    let (m, se) = mean_se(v);
+    match v.len() {
+        0 => "–".to_string(),
+        n if n < MIN_SEEDS_FOR_SE => format!("{m:.2}"),
+        _ => format!("{m:.2} ± {se:.2}"),
+    }
+}
+
 /// The networks' sizes of each variant of `grid` (its first task's config; the sizes do not depend
 /// on the task): the paper matched them across models, so a comparison is only fair as far as they match.
 fn params_table(grid: &Grid) -> Result<String> {
@@ -472,6 +484,14 @@ fn scene_of(grid: &Grid, out: &Path) -> String {
 mod tests {
     use super::*;
     use equiarm_types::{Corruption, TaskKind, ViewPreset};
+
+    /// Issue 58: two seeds that happened to agree printed "± 0.00", read as a precise figure.
+    #[test]
+    fn a_mean_of_fewer_than_three_seeds_prints_no_standard_error() {
+        assert_eq!(stat(&[]), "–");
+        assert_eq!(stat(&[0.8, 0.8]), "0.80");
+        assert_eq!(stat(&[0.7, 0.8, 0.9]), "0.80 ± 0.06");
+    }
 
     #[test]
     fn archives_keep_runs_of_one_name_with_different_configs_apart() {

@@ -372,17 +372,17 @@ mod tests {
         }
     }
 
+    /// A small CNN actor reading 16 px crops.
+    fn tiny_cnn() -> AgentConfig {
+        AgentConfig { model: equiarm_sac::agent::ModelKind::Cnn, hidden: 8, input_size: 16, ..AgentConfig::default() }
+    }
+
     /// Regression (issue 61): a 10 kB Observation announcing 8192 × 8192 pixels was decompressed in
     /// full (about 460 MB, 2.3 s) by the policy and by the trainer before it was refused, and a frame
     /// of another size than the policy's was answered on its centre crop without a word.
     #[test]
     fn frames_of_another_size_are_refused_from_their_sides_before_decompression() {
-        let arch = AgentConfig {
-            model: equiarm_sac::agent::ModelKind::Cnn,
-            hidden: 8,
-            input_size: 16,
-            ..AgentConfig::default()
-        };
+        let arch = tiny_cnn();
         let mut policy = Policy::new(PolicyMode::Greedy, arch, 19, None, 1).unwrap();
         for side in [8192, 38, 16] {
             let e = policy.answer(&announcing(side)).unwrap_err();
@@ -403,16 +403,11 @@ mod tests {
     /// Regression (issue 61): a peer's stream of oversized frames at 10 Hz cut the policy node's
     /// answers to the real env by more than half (188 commands in a minute, against 425 without the
     /// peer and 423 with it after this fix; `bench/oversized_frames.sh`): each bad one was held back
-    /// by the gate in place of the real one waiting there, and counted as a policy step. The node now screens an Observation before
-    /// the gate sees it, and a refused one is no step.
+    /// by the gate in place of the real one waiting there, and counted as a policy step. The node
+    /// now screens an Observation before the gate sees it, and a refused one is no step.
     #[test]
     fn a_bad_frame_is_screened_before_the_gate_and_is_no_policy_step() {
-        let arch = AgentConfig {
-            model: equiarm_sac::agent::ModelKind::Cnn,
-            hidden: 8,
-            input_size: 16,
-            ..AgentConfig::default()
-        };
+        let arch = tiny_cnn();
         let mut policy = Policy::new(PolicyMode::Sample, arch.clone(), 19, None, 1).unwrap();
         let e = policy.screen(&announcing(8192)).unwrap_err();
         assert!(matches!(e, AnswerError::Frame(BadFrame::Size { want: 19, .. })), "{e}");
