@@ -29,7 +29,8 @@ pytestmark = pytest.mark.skipif(not BIN, reason="EQUIARM_BIN is not set: point i
 
 SIZE = 38
 CONFIG = {
-    "task": "block_pulling", "view": "side", "corruption": "none", "image_size": SIZE,
+    # the scene in full: a config without `arm` reads as the scene before the arm was drawn
+    "task": "block_pulling", "view": "side", "corruption": "none", "arm": "visible", "image_size": SIZE,
     "agent": {"model": "cnn", "hidden": 8, "input_size": 32},
     "demo_episodes": 1, "total_updates": 2, "training_starts": 10, "batch_size": 8, "num_envs": 1,
     "eval_every": 0, "checkpoint_every": 2, "seed": 0,
