@@ -199,8 +199,8 @@ pub struct Arm {
     base: Isometry3<f64>,
     /// Each drawn collider: its chain link, its handle and its pose in the link's frame.
     parts: Vec<(usize, ColliderHandle, Pose)>,
-    /// The joint angles of the last [`Arm::follow`].
-    ik: Ik,
+    /// The joint angles of the last [`Arm::follow`], rad.
+    q: [f64; JOINTS],
 }
 
 impl Arm {
@@ -232,7 +232,7 @@ impl Arm {
                 parts.push((k, handle, local));
             }
         }
-        let arm = Self { chain, base, parts, ik: Ik { q: [0.0; JOINTS], reached: true } };
+        let arm = Self { chain, base, parts, q: [0.0; JOINTS] };
         arm.place(scene);
         Ok(arm)
     }
@@ -240,32 +240,17 @@ impl Arm {
     /// Sets the joints by inverse kinematics so that the tool frame is `palm` (the gripper palm's
     /// pose), and moves the drawn parts there.
     pub fn follow(&mut self, scene: &mut Scene, palm: &Pose) {
-        self.ik = self.chain.ik(&self.base, &to_iso(palm));
+        self.q = self.chain.ik(&self.base, &to_iso(palm)).q;
         self.place(scene);
     }
 
     fn place(&self, scene: &mut Scene) {
-        let poses = self.chain.link_poses(&self.base, &self.ik.q);
+        let poses = self.chain.link_poses(&self.base, &self.q);
         for (k, handle, local) in &self.parts {
             if let Some(c) = scene.physics.colliders.get_mut(*handle) {
                 c.set_position(to_pose(&poses[*k]) * *local);
             }
         }
-    }
-
-    /// The joint angles (rad) and whether the last pose followed was within reach.
-    pub fn ik(&self) -> Ik {
-        self.ik
-    }
-
-    /// The chain (for forward kinematics).
-    pub fn chain(&self) -> &Chain {
-        &self.chain
-    }
-
-    /// Where the base stands.
-    pub fn base(&self) -> Isometry3<f64> {
-        self.base
     }
 }
 

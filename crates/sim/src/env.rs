@@ -198,11 +198,6 @@ impl Env {
         self.config.arm == ArmView::Visible && !self.config.corruption.gripper_only
     }
 
-    /// The arm's joint angles (rad) after the last reset or step, when it is shown.
-    pub fn arm_joints(&self) -> Option<[f64; crate::arm::JOINTS]> {
-        Some(self.episode.as_ref()?.arm.as_ref()?.ik().q)
-    }
-
     /// Starts a new episode from `seed`.
     pub fn reset(&mut self, seed: u64) -> Result<Observation> {
         let mut rng = Rng::new(seed);

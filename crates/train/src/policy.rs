@@ -103,10 +103,16 @@ pub fn action_of(c: &GripperCommand) -> Action {
 /// stated sides, before anything is decompressed (a 10 kB message can announce 8192 × 8192 pixels,
 /// about 460 MB of planes).
 pub fn frame_of_size(obs: &Observation, want: usize) -> Result<StoredFrame, BadFrame> {
+    size_is(obs, want)?;
+    frame_of(obs)
+}
+
+/// Whether an Observation states a `want` × `want` frame (its sides only; nothing is read).
+fn size_is(obs: &Observation, want: usize) -> Result<(), BadFrame> {
     if (obs.height as usize, obs.width as usize) != (want, want) {
         return Err(BadFrame::Size { height: obs.height, width: obs.width, want });
     }
-    frame_of(obs)
+    Ok(())
 }
 
 /// The frame of an Observation (rgb8 colour, half-float depth, holding), as the replay stores it;
@@ -234,9 +240,8 @@ impl Policy {
         let acts = obs.episode >= self.expert_episodes
             && self.agent.is_some()
             && matches!(self.mode, PolicyMode::Sample | PolicyMode::Greedy);
-        let want = self.frame_size;
-        if acts && (obs.height as usize, obs.width as usize) != (want, want) {
-            return Err(BadFrame::Size { height: obs.height, width: obs.width, want }.into());
+        if acts {
+            size_is(obs, self.frame_size)?;
         }
         Ok(())
     }
