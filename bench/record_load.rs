@@ -179,7 +179,7 @@ fn round(args: &Args, domain: u16, foxglove: bool) -> Round {
 
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
     let published: Vec<u64> = rt.block_on(async {
-        let opts = RosOptions { domain_id: domain, localhost_only: false };
+        let opts = RosOptions { domain_id: domain, ..Default::default() };
         // a frame the simulator rendered (the paper's 152 px view of block pulling), so the messages
         // compress as the suite's do
         let mut stepper = Stepper::new(EnvConfig::new(TaskKind::BlockPulling), "env0", 0, false).unwrap();

@@ -90,6 +90,13 @@ enum Command {
         after_help = "Examples:\n  equiarm device-check --device vulkan --size paper --run-minutes 5\n  equiarm device-check --device vulkan:cpu --size reduced16 --reps 3 --run-minutes 1\n  equiarm device-check --device cpu --size reduced16 --no-cpu --run-minutes 0"
     )]
     DeviceCheck(equiarm_train::device_check::DeviceCheckArgs),
+    /// DDS Security (SROS2): keystores and the nodes' enclaves, as `ros2 security` makes them; a node
+    /// started with ROS_SECURITY_ENABLE=true joins only in its enclave (docs/security.md).
+    #[command(
+        subcommand,
+        after_help = "Examples:\n  equiarm security create-keystore keys\n  equiarm security create-enclave keys /equiarm/env0/sim\n  equiarm security create-enclave keys /my_tool --all-topics --domain 7\n  equiarm security list-enclaves keys"
+    )]
+    Security(cmd::security::SecurityCommand),
 }
 
 fn main() -> ExitCode {
@@ -117,6 +124,7 @@ fn dispatch(command: Command) -> anyhow::Result<ExitCode> {
         Command::Rotest(c) => cmd::rotest::run(c),
         Command::Experiment(c) => cmd::experiment::run(c),
         Command::DeviceCheck(a) => cmd::device_check::run(&a),
+        Command::Security(c) => cmd::security::run(c),
     }
 }
 

@@ -51,7 +51,7 @@ fn echo_then_signal(domain: u16, signal: &str) {
 
     let rt = tokio::runtime::Runtime::new().unwrap();
     let line = rt.block_on(async {
-        let mut node = RosNode::new("/", "cli_pub", &RosOptions { domain_id: domain, localhost_only: false }).unwrap();
+        let mut node = RosNode::new("/", "cli_pub", &RosOptions { domain_id: domain, ..Default::default() }).unwrap();
         let publ = node.publisher::<GripperCommand>("/cli/gripper_cmd", qos::command()).unwrap();
         let start = Instant::now();
         loop {

@@ -48,7 +48,7 @@ fn capture_logs() {
 }
 
 fn options(domain_id: u16) -> RosOptions {
-    RosOptions { domain_id, localhost_only: false }
+    RosOptions { domain_id, ..Default::default() }
 }
 
 /// Starts the Python peer; its stdout is JSON lines.

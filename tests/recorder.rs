@@ -98,7 +98,7 @@ fn sigint_leaves_a_complete_bag_with_every_message_after_the_match() {
     let mut rec = record(81, &bag, &["--all", "--compression", "lz4"]);
     let rt = tokio::runtime::Runtime::new().unwrap();
     let published = rt.block_on(async {
-        let mut node = RosNode::new("/", "rec_pub", &RosOptions { domain_id: 81, localhost_only: false }).unwrap();
+        let mut node = RosNode::new("/", "rec_pub", &RosOptions { domain_id: 81, ..Default::default() }).unwrap();
         let cmds = node.publisher::<GripperCommand>("/rec/gripper_cmd", qos::command()).unwrap();
         let eps = node.publisher::<EpisodeResult>("/episodes", qos::stream(100)).unwrap();
         // the recorder discovers topics once a second, then matches
@@ -147,7 +147,7 @@ fn the_recorder_says_when_a_topic_loses_its_last_publisher() {
     });
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(async {
-        let mut node = RosNode::new("/", "lost_pub", &RosOptions { domain_id: 93, localhost_only: false }).unwrap();
+        let mut node = RosNode::new("/", "lost_pub", &RosOptions { domain_id: 93, ..Default::default() }).unwrap();
         let cmds = node.publisher::<GripperCommand>("/lost/gripper_cmd", qos::command()).unwrap();
         assert!(node.wait_for_subscription(&cmds, Duration::from_secs(15)).await, "recorder never subscribed");
         for k in 0..5 {
@@ -184,7 +184,7 @@ fn sigkill_loses_at_most_half_a_second_and_recover_makes_a_readable_bag() {
         record(82, &bag, &["/rec/gripper_cmd:equiarm_msgs/msg/GripperCommand", "/rec/image:sensor_msgs/msg/Image"]);
     let rt = tokio::runtime::Runtime::new().unwrap();
     let (published_at_kill, rate_hz) = rt.block_on(async {
-        let mut node = RosNode::new("/", "rec_pub", &RosOptions { domain_id: 82, localhost_only: false }).unwrap();
+        let mut node = RosNode::new("/", "rec_pub", &RosOptions { domain_id: 82, ..Default::default() }).unwrap();
         let cmds = node.publisher::<GripperCommand>("/rec/gripper_cmd", qos::command()).unwrap();
         let imgs = node.publisher::<Image>("/rec/image", qos::sensor_data()).unwrap();
         assert!(node.wait_for_subscription(&cmds, Duration::from_secs(15)).await, "recorder never subscribed");
@@ -296,7 +296,7 @@ fn bag_play_republishes_every_message_in_order_on_remapped_topics() {
         play(83, &bag, &["--rate", "2", "--wait-ms", "2000", "--remap", "/rec/gripper_cmd:/played/gripper_cmd"]);
     let rt = tokio::runtime::Runtime::new().unwrap();
     let got = rt.block_on(async {
-        let mut node = RosNode::new("/", "play_sub", &RosOptions { domain_id: 83, localhost_only: false }).unwrap();
+        let mut node = RosNode::new("/", "play_sub", &RosOptions { domain_id: 83, ..Default::default() }).unwrap();
         let sub = node.subscription::<GripperCommand>("/played/gripper_cmd", qos::stream(100)).unwrap();
         let mut got = Vec::new();
         let start = Instant::now();
@@ -331,7 +331,7 @@ fn bag_play_lockstep_waits_for_the_command_naming_each_observation() {
         play(84, &bag, &["--lockstep", "300", "--wait-ms", "2000", "--remap", "/env0/observation:/ls/observation"]);
     let rt = tokio::runtime::Runtime::new().unwrap();
     let seen = rt.block_on(async {
-        let mut node = RosNode::new("/", "policy", &RosOptions { domain_id: 84, localhost_only: false }).unwrap();
+        let mut node = RosNode::new("/", "policy", &RosOptions { domain_id: 84, ..Default::default() }).unwrap();
         let sub = node.subscription::<Observation>("/ls/observation", qos::command()).unwrap();
         let cmds = node.publisher::<GripperCommand>("/ls/gripper_cmd", qos::command()).unwrap();
         let mut seen = Vec::new();

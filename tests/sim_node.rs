@@ -59,7 +59,7 @@ impl Drop for Sim {
 }
 
 fn node(domain: u16, name: &str) -> RosNode {
-    RosNode::new("/", name, &RosOptions { domain_id: domain, localhost_only: false }).unwrap()
+    RosNode::new("/", name, &RosOptions { domain_id: domain, ..Default::default() }).unwrap()
 }
 
 /// The expert's action for `obs`, as a policy node in expert mode sends it.

@@ -32,18 +32,70 @@ impl BadInputLog {
     }
 }
 
+/// A message serialized as itself, followed with `pad` by up to three zero bytes so that the
+/// serialized payload (4-byte encapsulation header and CDR body) is a multiple of 4 bytes long, as
+/// RTPS allows (DDS-RTPS 2.5 §10.2: a payload may end in up to 3 padding bytes; CDR readers stop at
+/// the end of the type). Secured nodes need it: RustDDS 0.15.1 encrypts a payload and then pads the
+/// DATA submessage to 4 bytes, but when decrypting it reads the MAC from the end of that padded
+/// payload, so a sample whose length is not a multiple of 4 never decrypts (docs/security.md).
+pub(crate) struct Padded<M> {
+    pub(crate) msg: M,
+    pub(crate) pad: bool,
+}
+
+impl<M: serde::Serialize> serde::Serialize for Padded<M> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::{Error as _, SerializeTuple};
+        if !self.pad {
+            return self.msg.serialize(s);
+        }
+        let mut counter = ByteCount(0);
+        cdr_encoding::to_writer::<M, byteorder::LittleEndian, _>(&mut counter, &self.msg)
+            .map_err(|e| S::Error::custom(format!("measuring a sample: {e}")))?;
+        let pad = (4 - counter.0 % 4) % 4;
+        let mut t = s.serialize_tuple(1 + pad)?;
+        t.serialize_element(&self.msg)?;
+        for _ in 0..pad {
+            t.serialize_element(&0u8)?;
+        }
+        t.end()
+    }
+}
+
+/// Errors name the topic and type, not the sample (which may be megabytes).
+impl<M> std::fmt::Debug for Padded<M> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("(the sample)")
+    }
+}
+
+/// An `io::Write` that only counts.
+struct ByteCount(usize);
+
+impl std::io::Write for ByteCount {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0 += buf.len();
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
 /// A typed publisher; [`Publisher::publish`] never blocks the runtime for long (reliable writers wait
 /// at most 100 ms for window space, then report an error).
 pub struct Publisher<M: RosMessage> {
-    pub(crate) inner: ros2_client::Publisher<M>,
+    pub(crate) inner: ros2_client::Publisher<Padded<M>>,
     pub(crate) topic: String,
+    /// Pad each sample's CDR to a multiple of 4 bytes (on a secured node; see [`Padded`]).
+    pub(crate) pad: bool,
 }
 
 impl<M: RosMessage> Publisher<M> {
     /// Publishes `msg`; the error names the topic and type.
     pub async fn publish(&self, msg: M) -> anyhow::Result<()> {
         self.inner
-            .async_publish(msg)
+            .async_publish(Padded { msg, pad: self.pad })
             .await
             .map_err(|e| anyhow!("publishing {} on '{}': {e:?}", M::TYPE_NAME, self.topic))
     }
@@ -115,5 +167,28 @@ impl<M: RosMessage> Subscriber<M> {
     /// Payloads dropped on this topic so far.
     pub fn bad_input_count(&self) -> u64 {
         self.log.counts().get(&self.topic).copied().unwrap_or(0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use byteorder::LittleEndian;
+    use equiarm_msgs::msg::{EpisodeResult, GripperCommand};
+
+    /// Padded payloads (4-byte header + body) are a multiple of 4 long and read back as the message;
+    /// unpadded ones are exactly the message's CDR.
+    #[test]
+    fn padded_samples_are_a_multiple_of_four_bytes_and_read_back_unchanged() {
+        let cmd = GripperCommand { obs_seq: 3, ..Default::default() };
+        let plain = cdr_encoding::to_vec::<_, LittleEndian>(&cmd).unwrap();
+        assert_eq!(cdr_encoding::to_vec::<_, LittleEndian>(&Padded { msg: cmd.clone(), pad: false }).unwrap(), plain);
+        for env in ["", "a", "ab", "abc", "abcd"] {
+            let ep = EpisodeResult { env: env.to_string(), ..Default::default() };
+            let bytes = cdr_encoding::to_vec::<_, LittleEndian>(&Padded { msg: ep.clone(), pad: true }).unwrap();
+            assert_eq!((4 + bytes.len()) % 4, 0, "env '{env}': {} bytes", bytes.len());
+            let (back, _) = cdr_encoding::from_bytes::<EpisodeResult, LittleEndian>(&bytes).unwrap();
+            assert_eq!(back, ep);
+        }
     }
 }

@@ -18,6 +18,7 @@ pub mod policy;
 pub mod policy_cli;
 pub mod recorder;
 pub mod ros;
+pub mod secure;
 pub mod signals;
 pub mod sim;
 pub mod topic_watch;

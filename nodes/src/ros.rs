@@ -23,8 +23,9 @@ use std::time::Duration;
 use anyhow::{anyhow, bail};
 use equiarm_msgs::RosMessage;
 
-use crate::endpoints::BadInputLog;
+use crate::endpoints::{BadInputLog, Padded};
 pub use crate::endpoints::{Publisher, Subscriber};
+use crate::secure::Security;
 pub use crate::signals::shutdown_signal;
 use log::{debug, info, warn};
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
@@ -78,6 +79,8 @@ pub struct RosOptions {
     pub domain_id: u16,
     /// Use only the loopback interface (ROS_LOCALHOST_ONLY=1 or ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST).
     pub localhost_only: bool,
+    /// DDS Security (the ROS_SECURITY_* variables; off by default).
+    pub security: Security,
 }
 
 impl RosOptions {
@@ -99,7 +102,7 @@ impl RosOptions {
         };
         let localhost_only = get("ROS_LOCALHOST_ONLY").is_some_and(|v| v.trim() == "1")
             || get("ROS_AUTOMATIC_DISCOVERY_RANGE").is_some_and(|v| v.trim().eq_ignore_ascii_case("LOCALHOST"));
-        Ok(Self { domain_id, localhost_only })
+        Ok(Self { domain_id, localhost_only, security: Security::from_vars(&get) })
     }
 }
 
@@ -110,6 +113,8 @@ pub struct RosNode {
     context: Context,
     fqn: String,
     bad_input: Arc<BadInputLog>,
+    /// Joined with DDS Security (its publishers pad their samples, see `Padded`).
+    secured: bool,
 }
 
 impl RosNode {
@@ -120,6 +125,8 @@ impl RosNode {
         if opts.localhost_only {
             builder = builder.with_only_networks([Ipv4Addr::LOCALHOST]);
         }
+        let fqn = if namespace == "/" { format!("/{name}") } else { format!("{namespace}/{name}") };
+        let enclave = opts.security.apply(&mut builder, &fqn, opts.domain_id)?;
         let participant =
             builder.build().map_err(|e| anyhow!("creating DDS participant on domain {}: {e:?}", opts.domain_id))?;
         let context = Context::from_domain_participant(participant)
@@ -129,15 +136,19 @@ impl RosNode {
         let options = NodeOptions::new().enable_rosout(true).start_parameter_services(false);
         let mut node = context.new_node(node_name, options).map_err(|e| anyhow!("creating node '{name}': {e:?}"))?;
         let spinner = node.spinner().map_err(|e| anyhow!("creating spinner of node '{name}': {e:?}"))?;
-        let fqn = if namespace == "/" { format!("/{name}") } else { format!("{namespace}/{name}") };
         let task_name = fqn.clone();
         tokio::spawn(async move {
             if let Err(e) = spinner.spin().await {
                 warn!("{task_name}: spinner stopped: {e:?}");
             }
         });
-        info!("{fqn}: joined ROS 2 domain {} (localhost only: {})", opts.domain_id, opts.localhost_only);
-        Ok(Self { node, context, fqn, bad_input: Arc::new(BadInputLog::default()) })
+        let security = enclave.as_ref().map_or("off".to_string(), |e| format!("enclave {e}"));
+        info!(
+            "{fqn}: joined ROS 2 domain {} (localhost only: {}; security: {security})",
+            opts.domain_id, opts.localhost_only
+        );
+        let secured = enclave.is_some();
+        Ok(Self { node, context, fqn, bad_input: Arc::new(BadInputLog::default()), secured })
     }
 
     /// Fully qualified node name, e.g. `/env0/sim`.
@@ -163,10 +174,10 @@ impl RosNode {
         let t = self.topic::<M>(topic, &qos)?;
         let inner = self
             .node
-            .create_publisher::<M>(&t, Some(qos))
+            .create_publisher::<Padded<M>>(&t, Some(qos))
             .map_err(|e| anyhow!("creating publisher on '{topic}' ({}): {e:?}", M::TYPE_NAME))?;
         debug!("{}: publishing {} on {topic}", self.fqn, M::TYPE_NAME);
-        Ok(Publisher { inner, topic: topic.to_string() })
+        Ok(Publisher { inner, topic: topic.to_string(), pad: self.secured })
     }
 
     /// A subscription to `M` on `topic` with `qos`. Payloads that do not decode are counted, logged once
@@ -234,7 +245,7 @@ mod tests {
     fn ros_env_is_read_and_validated() {
         assert_eq!(RosOptions::from_vars(vars(&[])).unwrap(), RosOptions::default());
         let o = RosOptions::from_vars(vars(&[("ROS_DOMAIN_ID", "42"), ("ROS_LOCALHOST_ONLY", "1")])).unwrap();
-        assert_eq!(o, RosOptions { domain_id: 42, localhost_only: true });
+        assert_eq!(o, RosOptions { domain_id: 42, localhost_only: true, security: Security::Off });
         let o = RosOptions::from_vars(vars(&[("ROS_AUTOMATIC_DISCOVERY_RANGE", "localhost")])).unwrap();
         assert!(o.localhost_only);
         for bad in ["233", "-1", "abc"] {

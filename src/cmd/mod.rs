@@ -9,6 +9,7 @@ pub mod nn;
 pub mod policy;
 pub mod record;
 pub mod rotest;
+pub mod security;
 pub mod sim;
 pub mod topic;
 pub mod train;
