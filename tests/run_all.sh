@@ -14,6 +14,8 @@ export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/equiarm/target}"
 export CARGO_TERM_COLOR=never
 
 source tests/python_env.sh
+# OpenSSL's headers for the build (DDS Security, docs/security.md).
+source tests/openssl_env.sh
 # The GPU build's device tests run on Mesa's lavapipe, a Vulkan driver on the CPU (docs/backends.md).
 source tests/vulkan_env.sh
 
