@@ -83,20 +83,41 @@ async fn exchange(
     r
 }
 
+/// The sim and the policy of env0, each in its enclave of a new keystore in `dir`, with the
+/// endpoints of the lock-step loop.
+struct SecuredPair {
+    _sim: RosNode,
+    _policy: RosNode,
+    obs_pub: Publisher<Observation>,
+    cmd_sub: Subscriber<GripperCommand>,
+    cmd_pub: Publisher<GripperCommand>,
+    obs_sub: Subscriber<Observation>,
+}
+
+impl SecuredPair {
+    fn new(dir: &Path, domain: u16) -> Self {
+        keystore(dir, domain, &["/equiarm/env0/sim", "/equiarm/env0/policy"]);
+        let mut sim = RosNode::new("/env0", "sim", &secured(domain, dir, "/equiarm/env0/sim")).unwrap();
+        let mut policy = RosNode::new("/env0", "policy", &secured(domain, dir, "/equiarm/env0/policy")).unwrap();
+        Self {
+            obs_pub: sim.publisher("observation", qos::command()).unwrap(),
+            cmd_sub: sim.subscription("gripper_cmd", qos::command()).unwrap(),
+            cmd_pub: policy.publisher("gripper_cmd", qos::command()).unwrap(),
+            obs_sub: policy.subscription("observation", qos::command()).unwrap(),
+            _sim: sim,
+            _policy: policy,
+        }
+    }
+}
+
 /// The policy and the sim of env0 in their own enclaves: a 57-byte GripperCommand (a length RustDDS
 /// 0.15.1 cannot decrypt unless padded, see `Padded` in nodes/src/endpoints.rs) and a fragmented
 /// 152-pixel Observation each way they go in the suite, encrypted.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn secured_nodes_exchange_commands_and_observations() {
     let tmp = tempfile::tempdir().unwrap();
-    keystore(tmp.path(), 61, &["/equiarm/env0/sim", "/equiarm/env0/policy"]);
-    let mut sim = RosNode::new("/env0", "sim", &secured(61, tmp.path(), "/equiarm/env0/sim")).unwrap();
-    let mut policy = RosNode::new("/env0", "policy", &secured(61, tmp.path(), "/equiarm/env0/policy")).unwrap();
-    let obs_pub = sim.publisher::<Observation>("observation", qos::command()).unwrap();
-    let cmd_sub = sim.subscription::<GripperCommand>("gripper_cmd", qos::command()).unwrap();
-    let cmd_pub = policy.publisher::<GripperCommand>("gripper_cmd", qos::command()).unwrap();
-    let obs_sub = policy.subscription::<Observation>("observation", qos::command()).unwrap();
-    let r = exchange(&cmd_pub, &obs_pub, &cmd_sub, &obs_sub, 30, 5).await;
+    let pair = SecuredPair::new(tmp.path(), 61);
+    let r = exchange(&pair.cmd_pub, &pair.obs_pub, &pair.cmd_sub, &pair.obs_sub, 30, 5).await;
     assert!(r.cmds >= 5 && r.obs >= 5, "secured nodes exchanged only {r:?} in 30 s");
 }
 
@@ -105,14 +126,9 @@ async fn secured_nodes_exchange_commands_and_observations() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_plain_participant_sees_nothing_and_reaches_nobody() {
     let tmp = tempfile::tempdir().unwrap();
-    keystore(tmp.path(), 62, &["/equiarm/env0/sim", "/equiarm/env0/policy"]);
-    let mut sim = RosNode::new("/env0", "sim", &secured(62, tmp.path(), "/equiarm/env0/sim")).unwrap();
-    let mut policy = RosNode::new("/env0", "policy", &secured(62, tmp.path(), "/equiarm/env0/policy")).unwrap();
+    let pair = SecuredPair::new(tmp.path(), 62);
+    let (obs_pub, cmd_sub, cmd_pub, obs_sub) = (&pair.obs_pub, &pair.cmd_sub, &pair.cmd_pub, &pair.obs_sub);
     let mut outsider = RosNode::new("/env0", "outsider", &plain(62)).unwrap();
-    let obs_pub = sim.publisher::<Observation>("observation", qos::command()).unwrap();
-    let cmd_sub = sim.subscription::<GripperCommand>("gripper_cmd", qos::command()).unwrap();
-    let cmd_pub = policy.publisher::<GripperCommand>("gripper_cmd", qos::command()).unwrap();
-    let obs_sub = policy.subscription::<Observation>("observation", qos::command()).unwrap();
     let spy_obs = outsider.subscription::<Observation>("observation", qos::command()).unwrap();
     let forged_cmd = outsider.publisher::<GripperCommand>("gripper_cmd", qos::command()).unwrap();
 
@@ -121,7 +137,7 @@ async fn a_plain_participant_sees_nothing_and_reaches_nobody() {
     let end = Instant::now() + Duration::from_secs(15);
     while Instant::now() < end {
         forged_cmd.publish(command_special()).await.unwrap();
-        let round = exchange(&cmd_pub, &obs_pub, &cmd_sub, &obs_sub, 1, 0).await;
+        let round = exchange(cmd_pub, obs_pub, cmd_sub, obs_sub, 1, 0).await;
         r.cmds += round.cmds;
         r.other_cmds += round.other_cmds;
         r.obs += round.obs;
