@@ -3,7 +3,8 @@
 # run without a GPU, and exports EQUIARM_LAVAPIPE_ICD, the path of its driver manifest.
 #
 # Installs Debian's `libvulkan1` (the Vulkan loader) and `mesa-vulkan-drivers` (lavapipe) when the
-# manifest is missing: as root with apt-get, else through sudo; says what to install otherwise.
+# manifest is missing (tests/apt_install.sh).
+source "$(dirname "${BASH_SOURCE[0]}")/apt_install.sh"
 _icd=""
 for _f in /usr/share/vulkan/icd.d/lvp_icd.x86_64.json /usr/share/vulkan/icd.d/lvp_icd.*.json; do
   if [ -f "$_f" ]; then _icd="$_f"; break; fi
@@ -11,14 +12,8 @@ done
 # (grep reads all of ldconfig's output: with `-q` it could stop early, ldconfig would die of SIGPIPE,
 # and under `set -o pipefail` a present loader would look missing.)
 if [ -z "$_icd" ] || ! ldconfig -p 2>/dev/null | grep 'libvulkan\.so\.1 ' >/dev/null; then
-  echo "equiarm: installing the Vulkan loader and Mesa's lavapipe (libvulkan1, mesa-vulkan-drivers) for the GPU build's tests" >&2
-  _sudo=()
-  if [ "$(id -u)" != 0 ]; then _sudo=(sudo -n); fi
-  if ! command -v apt-get >/dev/null \
-    || ! { "${_sudo[@]}" apt-get update -qq && DEBIAN_FRONTEND=noninteractive "${_sudo[@]}" apt-get install -y -qq --no-install-recommends libvulkan1 mesa-vulkan-drivers >/dev/null; }; then
-    echo "equiarm: could not install libvulkan1 and mesa-vulkan-drivers (needs apt-get as root or passwordless sudo): install them, or Mesa's lavapipe and a Vulkan loader by other means" >&2
-    return 1 2>/dev/null || exit 1
-  fi
+  eqa_apt_install "the Vulkan loader and Mesa's lavapipe for the GPU build's tests" libvulkan1 mesa-vulkan-drivers \
+    || { return 1 2>/dev/null || exit 1; }
   for _f in /usr/share/vulkan/icd.d/lvp_icd.*.json; do
     if [ -f "$_f" ]; then _icd="$_f"; break; fi
   done
@@ -30,4 +25,4 @@ fi
 export EQUIARM_LAVAPIPE_ICD="$_icd"
 # Mesa wants a runtime directory for its shader cache; a batch job may have none.
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
-unset _icd _f _sudo
+unset _icd _f

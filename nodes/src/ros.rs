@@ -126,7 +126,7 @@ impl RosNode {
             builder = builder.with_only_networks([Ipv4Addr::LOCALHOST]);
         }
         let fqn = if namespace == "/" { format!("/{name}") } else { format!("{namespace}/{name}") };
-        let enclave = opts.security.apply(&mut builder, &fqn, opts.domain_id)?;
+        let (builder, enclave) = opts.security.apply(builder, &fqn, opts.domain_id)?;
         let participant =
             builder.build().map_err(|e| anyhow!("creating DDS participant on domain {}: {e:?}", opts.domain_id))?;
         let context = Context::from_domain_participant(participant)

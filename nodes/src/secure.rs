@@ -47,16 +47,16 @@ impl Security {
         }
     }
 
-    /// Sets up `builder` for the node `fqn`: with its enclave's files when security is on and they
-    /// pass the checks; an error under Enforce (naming the variable or the file), a warning and plain
-    /// DDS under Permissive. Returns the enclave joined with, if any.
+    /// `builder` for the node `fqn`: with its enclave's files when security is on and they pass the
+    /// checks; an error under Enforce (naming the variable or the file), a warning and plain DDS
+    /// under Permissive. Returns the builder and the enclave joined with, if any.
     pub(crate) fn apply(
         &self,
-        builder: &mut DomainParticipantBuilder,
+        builder: DomainParticipantBuilder,
         fqn: &str,
         domain: u16,
-    ) -> anyhow::Result<Option<EnclaveName>> {
-        let Security::On { keystore, enforce, enclave_override } = self else { return Ok(None) };
+    ) -> anyhow::Result<(DomainParticipantBuilder, Option<EnclaveName>)> {
+        let Security::On { keystore, enforce, enclave_override } = self else { return Ok((builder, None)) };
         let enclave = || -> anyhow::Result<(EnclaveName, PathBuf)> {
             let Some(keystore) = keystore else {
                 bail!("ROS_SECURITY_ENABLE=true but ROS_SECURITY_KEYSTORE is not set");
@@ -65,7 +65,7 @@ impl Security {
                 Some(o) => EnclaveName::parse(o).map_err(|e| anyhow::anyhow!("ROS_SECURITY_ENCLAVE_OVERRIDE: {e}"))?,
                 None => EnclaveName::of_node(fqn)?,
             };
-            let dir = keystore.join("enclaves").join(&name.as_str()[1..]);
+            let dir = name.dir_in(keystore);
             if !dir.is_dir() {
                 bail!(
                     "enclave '{name}': no directory {} (create it with `equiarm security create-enclave {} {name}`)",
@@ -79,14 +79,12 @@ impl Security {
         match enclave() {
             Ok((name, dir)) => {
                 let files = DomainParticipantSecurityConfigFiles::with_ros_default_names(dir, String::new());
-                let b = std::mem::replace(builder, DomainParticipantBuilder::new(0));
-                *builder = b.builtin_security(files);
-                Ok(Some(name))
+                Ok((builder.builtin_security(files), Some(name)))
             }
             Err(e) if *enforce => bail!("security (ROS_SECURITY_STRATEGY=Enforce): {fqn}: {e:#}"),
             Err(e) => {
                 warn!("security (Permissive): {fqn}: {e:#}; joining without security");
-                Ok(None)
+                Ok((builder, None))
             }
         }
     }
@@ -126,13 +124,13 @@ mod tests {
 
     #[test]
     fn enforce_refuses_and_permissive_warns_without_a_keystore() {
-        let mut b = DomainParticipantBuilder::new(0);
+        let b = || DomainParticipantBuilder::new(0);
         let on = |enforce| Security::On { keystore: None, enforce, enclave_override: None };
-        let e = on(true).apply(&mut b, "/env0/sim", 0).unwrap_err().to_string();
+        let e = on(true).apply(b(), "/env0/sim", 0).err().unwrap().to_string();
         assert!(e.contains("ROS_SECURITY_KEYSTORE") && e.contains("Enforce"), "{e}");
-        assert_eq!(on(false).apply(&mut b, "/env0/sim", 0).unwrap(), None);
+        assert_eq!(on(false).apply(b(), "/env0/sim", 0).unwrap().1, None);
         let missing = Security::On { keystore: Some("/nonexistent".into()), enforce: true, enclave_override: None };
-        let e = missing.apply(&mut b, "/env0/sim", 0).unwrap_err().to_string();
+        let e = missing.apply(b(), "/env0/sim", 0).err().unwrap().to_string();
         assert!(e.contains("/nonexistent/enclaves/equiarm/env0/sim"), "{e}");
     }
 }

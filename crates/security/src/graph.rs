@@ -47,6 +47,12 @@ impl EnclaveName {
         &self.0
     }
 
+    /// Where this enclave's files are in the keystore `root` (`root/enclaves/equiarm/env0/sim`), as
+    /// rcl looks for them.
+    pub fn dir_in(&self, root: &std::path::Path) -> std::path::PathBuf {
+        root.join("enclaves").join(&self.0[1..])
+    }
+
     /// The name's parts, without the leading '/'.
     pub fn parts(&self) -> impl Iterator<Item = &str> {
         self.0[1..].split('/')

@@ -98,7 +98,7 @@ impl Keystore {
 
     /// Where the enclave `name`'s files are (`KEYSTORE/enclaves/<name>`).
     pub fn enclave_dir(&self, name: &EnclaveName) -> PathBuf {
-        self.root.join("enclaves").join(&name.as_str()[1..])
+        name.dir_in(&self.root)
     }
 
     /// Creates the enclave `name` (or completes it: an existing identity is kept, as sros2 does) with
