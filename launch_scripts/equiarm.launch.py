@@ -12,7 +12,7 @@ same as `train.sh` starts:
   --eval-namespace /eval [--total-updates U] [--model M] [--deterministic]` (over DDS); when it exits
   the whole launch shuts down (the recorder gets SIGINT and closes its bag);
 - N training pairs: `equiarm sim --namespace /envK --task T --seed 1000·S+K --resolution FRAME`
-  (`--clock` for /env0) and
+  `--wait-subscribers 2` (`--clock` for /env0) and
   `equiarm policy --namespace /envK --mode sample --model M --hidden H --image FRAME:INPUT
   --seed 1000·S+K --expert-episodes D --max-lead 10` (D: the config's demo episodes spread over the
   envs; `--deterministic` instead of `--max-lead` with deterministic:=true);
@@ -107,7 +107,8 @@ def commands(args):
     def pair(ns, env_seed, mode, extra):
         name = ns.strip("/")
         sim = [exe, "sim", "--namespace", ns, "--task", task, "--seed", str(env_seed), "--resolution", str(frame),
-               "--view", view, "--corrupt", corrupt, "--arm", arm, "--stamp-origin", args.get("stamp_origin", "zero")]
+               "--view", view, "--corrupt", corrupt, "--arm", arm, "--stamp-origin", args.get("stamp_origin", "zero"),
+               "--wait-subscribers", "2"]  # as train.sh: steps once the trainer and the recorder subscribe
         if ns == EVAL_NAMESPACE:
             sim.append("--eval")  # its EpisodeResults are marked as evaluation episodes
         if ns == "/env0":

@@ -70,6 +70,26 @@ eqa_bin() {
   export EQUIARM_BIN
 }
 
+# eqa_secure RUN_DIR NUM_ENVS: DDS Security for a run of the suite (docs/security.md): the keystore
+# ROS_SECURITY_KEYSTORE names, else RUN_DIR/keystore (made on first use, reused by a resumed run), an
+# enclave for each node (the trainer, the recorder, /env0 … /envN-1 and /eval's sim and policy), and
+# the ROS 2 security variables (Enforce) that every node started afterwards reads.
+eqa_secure() {
+  local run_dir=$1 n=$2 ks e
+  ks=${ROS_SECURITY_KEYSTORE:-$run_dir/keystore}
+  if [ ! -e "$ks/enclaves/governance.p7s" ]; then
+    "$EQUIARM_BIN" security create-keystore "$ks" >/dev/null || return 1
+  fi
+  local enclaves=(/equiarm/trainer /equiarm/equiarm_recorder /equiarm/eval/sim /equiarm/eval/policy)
+  for i in $(seq 0 $((n - 1))); do enclaves+=("/equiarm/env$i/sim" "/equiarm/env$i/policy"); done
+  for e in "${enclaves[@]}"; do
+    "$EQUIARM_BIN" security create-enclave "$ks" "$e" >/dev/null || return 1
+  done
+  ROS_SECURITY_KEYSTORE=$(cd "$ks" && pwd)
+  export ROS_SECURITY_KEYSTORE ROS_SECURITY_ENABLE=true ROS_SECURITY_STRATEGY=Enforce
+  eqa_log "DDS Security: keystore $ROS_SECURITY_KEYSTORE, ${#enclaves[@]} enclaves, Enforce"
+}
+
 # eqa_start NAME LOG cmd... : runs cmd in its own session and process group (setsid; the group id is
 # the pid), stdout+stderr to LOG.
 eqa_start() {
@@ -206,7 +226,9 @@ eqa_recorded_run() {
 # The suite's nodes, as train.sh starts them (bench/soak.sh restarts some). They read: EQUIARM_BIN,
 # run_dir (its config.json; logs go to run_dir/logs/NAME.log), task, seed, num_envs, image (the frame
 # size), arch (the policies' architecture flags), per_env (expert episodes per env), pace (the
-# training policies' pacing flags), trainer_mode and extra (more trainer flags).
+# training policies' pacing flags), trainer_mode, extra (more trainer flags) and sim_wait (the
+# subscribers each sim waits for on /transitions and /episodes before its first step: the trainer, and
+# the recorder when recording; unset: none).
 # Start order: the recorder, the trainer, the policies, then the sims. Without multicast on the
 # loopback interface (Linux's default `lo`) RustDDS discovers same-host participants by unicast to the
 # first 12 participant ids only, so two participants started 13th and later never discover each
@@ -257,7 +279,8 @@ eqa_suite_sim() {
   [ "$i" -eq 0 ] && clock=(--clock)
   mapfile -t scene < <(eqa_scene_args "$run_dir/config.json")
   eqa_start "$name" "$run_dir/logs/$name.log" "$EQUIARM_BIN" sim --namespace "/env$i" --task "$task" \
-    --seed $((seed * 1000 + i)) --resolution "$image" "${scene[@]}" "${clock[@]}" --stamp-origin "$EQA_STAMP_ORIGIN"
+    --seed $((seed * 1000 + i)) --resolution "$image" "${scene[@]}" "${clock[@]}" --stamp-origin "$EQA_STAMP_ORIGIN" \
+    --wait-subscribers "${sim_wait:-0}"
 }
 
 # eqa_suite_sims: the training sims and the eval sim.
@@ -266,7 +289,8 @@ eqa_suite_sims() {
   for i in $(seq 0 $((num_envs - 1))); do eqa_suite_sim "$i"; done
   mapfile -t scene < <(eqa_scene_args "$run_dir/config.json")
   eqa_start sim_eval "$run_dir/logs/sim_eval.log" "$EQUIARM_BIN" sim --namespace /eval --eval --task "$task" \
-    --seed $((seed * 1000 + 999)) --resolution "$image" "${scene[@]}" --stamp-origin "$EQA_STAMP_ORIGIN"
+    --seed $((seed * 1000 + 999)) --resolution "$image" "${scene[@]}" --stamp-origin "$EQA_STAMP_ORIGIN" \
+    --wait-subscribers "${sim_wait:-0}"
 }
 
 # eqa_config_get FILE KEY: a number or string value of KEY in a config JSON (as written by

@@ -26,6 +26,8 @@
 #                       or H:PORT): open ws://127.0.0.1:PORT in Foxglove, no ROS install needed
 #   --force             a --run-dir that holds a run (metrics, checkpoints) is moved aside to
 #                       RUN_DIR.old-N first (without it such a directory is refused)
+#   --secure            DDS Security (SROS2, docs/security.md): every node joins in its own enclave of
+#                       the keystore ROS_SECURITY_KEYSTORE names, else RUN/keystore (made, then reused)
 #   --deterministic     lock-step rounds: the trainer and the training policies get --deterministic
 #                       (no --max-lead); with one seed two runs record the same /transitions of the
 #                       training envs and end with the same weights. The eval pair is not lock-stepped:
@@ -43,7 +45,7 @@ source "$(dirname "$0")/lib.sh"
 eqa_default_signals "$0" "$@"
 cd "$(dirname "$0")/.."
 
-task=block_pulling preset=reduced16 config="" num_envs=5 seed=0 run_dir="" total_updates="" record=1 det=0 force=0
+task=block_pulling preset=reduced16 config="" num_envs=5 seed=0 run_dir="" total_updates="" record=1 det=0 force=0 secure=0
 extra=()
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -58,8 +60,9 @@ while [ $# -gt 0 ]; do
     --foxglove) EQA_RECORD_FLAGS=(--foxglove "$2"); shift 2 ;;
     --force) force=1; shift ;;
     --deterministic) det=1; shift ;;
+    --secure) secure=1; shift ;;
     --) shift; extra=("$@"); break ;;
-    -h|--help) sed -n '2,38p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,40p' "$0"; exit 0 ;;
     *) echo "train.sh: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -103,6 +106,7 @@ arch=(--model "$model" --hidden "$hidden" --image "$image:$input")
 pace=(--max-lead 10) trainer_mode=()
 [ $det = 1 ] && pace=(--deterministic) trainer_mode=(--deterministic)
 
+[ $secure = 1 ] && { eqa_secure "$run_dir" "$num_envs" || exit 1; }
 echo "== run directory $run_dir (ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in $run_dir/logs)"
 if [ $record = 1 ]; then
   obs_topics=(/eval/observation:equiarm_msgs/msg/Observation)
@@ -112,7 +116,9 @@ else
   mkdir -p "$run_dir/logs"
   trap eqa_on_exit EXIT; trap 'exit 130' INT; trap 'exit 143' TERM
 fi
-# Start order: the recorder, the trainer, the policies, then the sims (lib.sh, "The suite's nodes").
+# Start order: the recorder, the trainer, the policies, then the sims (lib.sh, "The suite's nodes");
+# each sim steps once the trainer (and the recorder) subscribe to its transitions.
+sim_wait=$((1 + record))
 # (the trainer's log is appended to: a resumed run's output is followed from where it starts)
 log_from=$(( $(stat -c %s "$run_dir/logs/trainer.log" 2>/dev/null || echo 0) + 1 ))
 eqa_suite_trainer trainer || exit 1

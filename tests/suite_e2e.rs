@@ -11,7 +11,9 @@
 //! A failing test SIGKILLs what is left of its suite ([`KillOnPanic`]), so that a 100,000-update
 //! run does not go on after it.
 //!
-//! Domains 105 and 106. The test command runs this inside a private network namespace.
+//! A third runs the secured suite (`train.sh --secure`).
+//!
+//! Domains 105, 106 and 107. The test command runs this inside a private network namespace.
 
 mod support;
 
@@ -25,8 +27,14 @@ fn bin() -> &'static str {
 }
 
 fn train_sh(domain: u32, run_dir: &Path, updates: u32, extra: &[&str]) -> Command {
+    train_sh_with(domain, run_dir, updates, &[], extra)
+}
+
+/// `train.sh SCRIPT_ARGS … -- TRAINER_ARGS … EXTRA`.
+fn train_sh_with(domain: u32, run_dir: &Path, updates: u32, script_args: &[&str], extra: &[&str]) -> Command {
     let mut c = Command::new("bash");
     c.arg(support::repo().join("launch_scripts/train.sh"))
+        .args(script_args)
         .args(["--num-envs", "2", "--total-updates", &updates.to_string(), "--run-dir"])
         .arg(run_dir)
         .args(["--", "--image", "19:16", "--hidden", "8", "--batch-size", "16", "--demo-episodes", "2"])
@@ -129,6 +137,53 @@ fn train_sh_runs_the_suite_to_the_end() {
     assert!(v["transitions"].as_u64().unwrap_or(0) > 0 && v["dims"].as_array().map_or(0, |d| d.len()) == 5, "{v}");
     std::thread::sleep(Duration::from_millis(500));
     assert!(survivors(105).is_empty(), "left running: {:?}", survivors(105));
+}
+
+/// `train.sh --secure`: every node joins in its own enclave of the run's keystore (docs/security.md);
+/// the suite learns and records as the plain one (transitions, weights, evaluations, the bag).
+#[test]
+fn the_secured_suite_learns_and_records() {
+    let run_dir = support::scratch("suite-e2e-secure");
+    let _cleanup = KillOnPanic(107);
+    let out = train_sh_with(107, &run_dir, 20, &["--secure"], &[])
+        .env_remove("ROS_SECURITY_KEYSTORE")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "train.sh --secure failed:\n{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("success rate"), "no evaluation table:\n{stdout}");
+    for (name, enclave) in [
+        ("trainer", "/equiarm/trainer"),
+        ("record", "/equiarm/equiarm_recorder"),
+        ("sim0", "/equiarm/env0/sim"),
+        ("policy1", "/equiarm/env1/policy"),
+        ("sim_eval", "/equiarm/eval/sim"),
+        ("policy_eval", "/equiarm/eval/policy"),
+    ] {
+        let l = log(&run_dir, name);
+        assert!(l.contains(&format!("security: enclave {enclave})")), "{name} did not join in {enclave}:\n{l}");
+    }
+    let trainer = log(&run_dir, "trainer");
+    let received: u64 = trainer
+        .lines()
+        .find_map(|l| l.split("received ").nth(1)?.split(' ').next()?.parse().ok())
+        .unwrap_or_else(|| panic!("trainer log has no 'received N transitions':\n{trainer}"));
+    assert!(received >= 20, "only {received} transitions reached the trainer");
+    let newest = log(&run_dir, "policy0")
+        .lines()
+        .filter_map(|x| x.split("weights version ").nth(1)?.split(' ').next()?.parse::<u64>().ok())
+        .max();
+    assert!(newest.unwrap_or(0) >= 2, "policy0 never switched to broadcast weights");
+    bag_opens(&run_dir.join("bag"));
+    let info = Command::new(bin()).args(["bag", "info"]).arg(run_dir.join("bag")).output().unwrap();
+    let info = String::from_utf8_lossy(&info.stdout);
+    let tr = info.lines().find(|l| l.trim_start().starts_with("/transitions ")).unwrap_or_else(|| panic!("{info}"));
+    assert!(!tr.contains(" 0 msgs"), "{tr}");
+    assert!(run_dir.join("keystore/enclaves/equiarm/env1/sim/cert.pem").is_file());
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(survivors(107).is_empty(), "left running: {:?}", survivors(107));
 }
 
 #[test]

@@ -109,7 +109,40 @@ impl<M: RosMessage> Publisher<M> {
     pub fn subscription_count(&self, node: &RosNode) -> usize {
         self.inner.get_subscription_count(&node.node)
     }
+
+    /// Returns once `n` subscriptions have matched (at once for `n` = 0), saying every 5 s how many
+    /// have. A reliable, volatile writer keeps (and repairs) only what it writes after a reader has
+    /// matched; under DDS Security that match comes seconds after the participants meet.
+    pub async fn wait_for_subscriptions(&self, node: &RosNode, n: usize) {
+        if n == 0 {
+            return;
+        }
+        // the first match through the node's graph events (counting before it logs an error)
+        let first = self.inner.wait_for_subscription(&node.node);
+        tokio::pin!(first);
+        let mut said = tokio::time::interval_at(tokio::time::Instant::now() + SAY_EVERY, SAY_EVERY);
+        loop {
+            tokio::select! {
+                () = &mut first => break,
+                _ = said.tick() => log::info!("{}: waiting for {n} subscriber(s), none matched yet", self.topic),
+            }
+        }
+        loop {
+            let have = self.subscription_count(node);
+            if have >= n {
+                log::info!("{}: {have} subscriber(s) matched", self.topic);
+                return;
+            }
+            tokio::select! {
+                () = tokio::time::sleep(Duration::from_millis(50)) => {}
+                _ = said.tick() => log::info!("{}: waiting for {n} subscriber(s), {have} matched", self.topic),
+            }
+        }
+    }
 }
+
+/// How often [`Publisher::wait_for_subscriptions`] says it is still waiting.
+const SAY_EVERY: Duration = Duration::from_secs(5);
 
 /// A typed subscription that survives bad input.
 pub struct Subscriber<M: RosMessage> {

@@ -103,6 +103,13 @@ fn subscribe(
     tasks: &mut Vec<tokio::task::JoinHandle<()>>,
     watches: &mut Vec<Watch>,
 ) -> anyhow::Result<()> {
+    if node.secured() && name == "/clock" {
+        // RustDDS 0.15 keys a remote reader's keys by (local writer, remote participant): a second
+        // reader of one writer in a participant (ros2-client's node has its own /clock reader) is
+        // refused, and the writer then sends nothing to anyone (docs/security.md).
+        warn!("not recording /clock: a secured node cannot hold a second /clock reader (RustDDS 0.15)");
+        return Ok(());
+    }
     let (profile, offered) = qos_for(type_name);
     crate::with_message_type!(type_name, M => {
         let info = TopicInfo::of::<M>(name, &[offered]);

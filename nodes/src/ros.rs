@@ -156,6 +156,11 @@ impl RosNode {
         &self.fqn
     }
 
+    /// Whether the node joined with DDS Security.
+    pub fn secured(&self) -> bool {
+        self.secured
+    }
+
     /// The DDS domain this node is on.
     pub fn domain_id(&self) -> u16 {
         self.context.domain_id()

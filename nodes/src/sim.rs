@@ -106,6 +106,11 @@ pub struct SimArgs {
     /// advance by simulated time.
     #[arg(long, default_value = "zero", value_name = "zero|now|UNIX_SECONDS")]
     pub stamp_origin: StampOrigin,
+    /// Before the first step, wait until N subscribers have matched /transitions and /episodes
+    /// (train.sh: the trainer, and the recorder when it records). What a sim writes before a reader
+    /// has matched never reaches that reader; under DDS Security matching takes seconds.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub wait_subscribers: usize,
 }
 
 /// The EnvConfig the arguments describe: the config file (or defaults), then the flags.
@@ -177,6 +182,14 @@ pub async fn run(args: &SimArgs, opts: &RosOptions) -> anyhow::Result<SimStats> 
     let tf_pub = node.publisher::<TFMessage>("/tf", qos::stream(100))?;
     let signal = shutdown_signal();
     tokio::pin!(signal);
+    let n = args.wait_subscribers;
+    tokio::select! {
+        s = &mut signal => { info!("{}: {} received before the first step, shutting down", node.name(), s?); return Ok(sim.stats); }
+        () = async {
+            transition_pub.wait_for_subscriptions(&node, n).await;
+            episode_pub.wait_for_subscriptions(&node, n).await;
+        } => {}
+    }
     'episodes: while sim.episodes_started() < args.episodes.unwrap_or(u32::MAX) {
         let mut obs = sim.reset()?.clone();
         publish_clock(&obs.header.stamp).await?;

@@ -319,6 +319,7 @@ def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
         assert ("--eval" in sim) == (ns == "/eval")
         assert (_flag(sim, "--view"), _flag(sim, "--corrupt"), _flag(sim, "--arm")) == ("side", "none", "visible")
         assert ("--clock" in sim) == (ns == "/env0"), "exactly one sim publishes /clock"
+        assert _flag(sim, "--wait-subscribers") == "2", "the sims wait for the trainer and the recorder"
         origins.add(_flag(sim, "--stamp-origin"))
         assert pol[1] == "policy" and _flag(pol, "--namespace") == ns
         assert _flag(pol, "--mode") == ("greedy" if ns == "/eval" else "sample")
