@@ -1,15 +1,16 @@
 //! DDS Security (SROS2) between our nodes over loopback, in a private network namespace
 //! (`tests/run_all.sh`): secured nodes exchange samples of every size; a plain participant on the
-//! same domain receives nothing from them and reaches none of them; a node cannot publish what its
-//! permissions do not grant; a node refuses to start on a bad enclave under Enforce. Each test has
-//! its own domain; every loop is bounded in count and time.
+//! same domain (ours, and Cyclone DDS's Python binding) receives nothing from them and reaches none
+//! of them; a node cannot publish what its permissions do not grant; a capture of the loopback shows
+//! no plaintext of a secured sample; a node refuses to start on a bad enclave under Enforce. Each
+//! test has its own domain; every loop is bounded in count and time.
 
 mod support;
 
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use equiarm_msgs::msg::{GripperCommand, Observation};
+use equiarm_msgs::msg::{GripperCommand, Observation, PolicyWeights, Transition};
 use equiarm_nodes::ros::{Publisher, RosNode, RosOptions, Subscriber, qos};
 use equiarm_nodes::secure::Security;
 use equiarm_security::{EnclaveName, Grant, Keystore, Role};
@@ -67,20 +68,31 @@ async fn exchange(
     let mut r = Received::default();
     let end = Instant::now() + Duration::from_secs(secs);
     while Instant::now() < end && (enough == 0 || r.cmds < enough || r.obs < enough) {
-        cmd_pub.publish(command_typical()).await.unwrap();
-        obs_pub.publish(observation(7, 152, 3)).await.unwrap();
-        while let Ok(Some((m, _))) = cmd_sub.recv_timeout(Duration::from_millis(50)).await {
-            if m == command_typical() {
-                r.cmds += 1;
-            } else {
-                r.other_cmds += 1;
-            }
-        }
-        while let Ok(Some(_)) = obs_sub.recv_timeout(Duration::from_millis(50)).await {
-            r.obs += 1;
-        }
+        round(cmd_pub, obs_pub, cmd_sub, obs_sub, &mut r).await;
     }
     r
+}
+
+/// One command and one observation out, what arrived within 50 ms counted into `r`.
+async fn round(
+    cmd_pub: &Publisher<GripperCommand>,
+    obs_pub: &Publisher<Observation>,
+    cmd_sub: &Subscriber<GripperCommand>,
+    obs_sub: &Subscriber<Observation>,
+    r: &mut Received,
+) {
+    cmd_pub.publish(command_typical()).await.unwrap();
+    obs_pub.publish(observation(7, 152, 3)).await.unwrap();
+    while let Ok(Some((m, _))) = cmd_sub.recv_timeout(Duration::from_millis(50)).await {
+        if m == command_typical() {
+            r.cmds += 1;
+        } else {
+            r.other_cmds += 1;
+        }
+    }
+    while let Ok(Some(_)) = obs_sub.recv_timeout(Duration::from_millis(50)).await {
+        r.obs += 1;
+    }
 }
 
 /// The sim and the policy of env0, each in its enclave of a new keystore in `dir`, with the
@@ -149,6 +161,252 @@ async fn a_plain_participant_sees_nothing_and_reaches_nobody() {
     assert_eq!(r.other_cmds, 0, "forged commands reached the secured sim: {r:?}");
     assert_eq!(spied, 0, "the plain participant received {spied} observations");
     assert_eq!(forged_cmd.subscription_count(&outsider), 0, "a secured reader matched the plain writer");
+}
+
+/// What the suite's three nodes received in [`beside_an_intruder`], real and forged apart.
+#[derive(Default, Debug)]
+struct Counts {
+    cmds: usize,
+    forged_cmds: usize,
+    obs: usize,
+    transitions: usize,
+    forged_transitions: usize,
+    weights: usize,
+    forged_weights: usize,
+}
+
+/// The reward and run id of `dds_peer.py intrude`'s forged samples.
+const FORGED_REWARD: f32 = 1234.5;
+const FORGED_RUN: &str = "intruder";
+
+/// A sim, a policy and a trainer of env0 (nodes made by `node(namespace, name)`) exchange commands,
+/// observations, transitions and weights for `secs` while a plain Cyclone DDS participant
+/// (`dds_peer.py intrude`) listens on the same domain and forges commands, transitions and weights:
+/// what the nodes received, and the peer's report.
+async fn beside_an_intruder(
+    domain: u16,
+    secs: u64,
+    node: impl Fn(&str, &str) -> RosNode,
+) -> (Counts, serde_json::Value) {
+    let mut peer = support::python_script("dds_peer.py");
+    peer.args(["intrude", &domain.to_string(), &secs.to_string()]).stdout(std::process::Stdio::piped());
+    let peer = peer.spawn().unwrap_or_else(|e| panic!("starting dds_peer.py: {e}"));
+    let (mut sim, mut policy, mut trainer) = (node("/env0", "sim"), node("/env0", "policy"), node("/", "trainer"));
+    let obs_pub = sim.publisher::<Observation>("observation", qos::command()).unwrap();
+    let cmd_sub = sim.subscription::<GripperCommand>("gripper_cmd", qos::command()).unwrap();
+    let trans_pub = sim.publisher::<Transition>("/transitions", qos::stream(100)).unwrap();
+    let cmd_pub = policy.publisher::<GripperCommand>("gripper_cmd", qos::command()).unwrap();
+    let obs_sub = policy.subscription::<Observation>("observation", qos::command()).unwrap();
+    let weights_sub = policy.subscription::<PolicyWeights>("/policy/weights", qos::latched()).unwrap();
+    let weights_pub = trainer.publisher::<PolicyWeights>("/policy/weights", qos::latched()).unwrap();
+    let trans_sub = trainer.subscription::<Transition>("/transitions", qos::stream(100)).unwrap();
+    let real_transition = Transition { env: "env0".into(), episode: 1, step: 1, reward: 0.25, ..Default::default() };
+    let (mut c, mut r) = (Counts::default(), Received::default());
+    let end = Instant::now() + Duration::from_secs(secs);
+    let mut version = 0;
+    while Instant::now() < end {
+        version += 1;
+        let weights = PolicyWeights { run_id: "suite".into(), version, model: "equi".into(), ..Default::default() };
+        weights_pub.publish(weights).await.unwrap();
+        trans_pub.publish(real_transition.clone()).await.unwrap();
+        round(&cmd_pub, &obs_pub, &cmd_sub, &obs_sub, &mut r).await;
+        while let Ok(Some((t, _))) = trans_sub.recv_timeout(Duration::from_millis(10)).await {
+            *(if t.reward == FORGED_REWARD { &mut c.forged_transitions } else { &mut c.transitions }) += 1;
+        }
+        while let Ok(Some((w, _))) = weights_sub.recv_timeout(Duration::from_millis(10)).await {
+            *(if w.run_id == FORGED_RUN { &mut c.forged_weights } else { &mut c.weights }) += 1;
+        }
+    }
+    (c.cmds, c.forged_cmds, c.obs) = (r.cmds, r.other_cmds, r.obs);
+    let out = peer.wait_with_output().unwrap();
+    assert!(out.status.success(), "dds_peer.py intrude failed: {}", out.status);
+    let report = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .find(|v| v["event"] == "done")
+        .expect("dds_peer.py printed no report");
+    (c, report)
+}
+
+/// Cyclone DDS (Python binding, what rclpy on rmw_cyclonedds uses), plain, beside the suite's nodes:
+/// with the nodes plain it receives their observations, transitions and weights and its forgeries
+/// reach them (the control); with the nodes secured it receives nothing, and none of its commands,
+/// transitions or weights reaches a node, counted at each node, while the nodes still talk.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_plain_cyclone_peer_sees_nothing_and_reaches_nobody() {
+    let (plain_counts, plain_peer) =
+        beside_an_intruder(65, 8, |ns, name| RosNode::new(ns, name, &plain(65)).unwrap()).await;
+    let got = &plain_peer["received"];
+    assert!(
+        got["rt/env0/observation"].as_u64() > Some(0)
+            && got["rt/transitions"].as_u64() > Some(0)
+            && got["rt/policy/weights"].as_u64() > Some(0),
+        "the control: a plain peer should receive from plain nodes: {plain_peer}"
+    );
+    let c = &plain_counts;
+    assert!(c.forged_cmds > 0 && c.forged_transitions > 0 && c.forged_weights > 0, "the control: {c:?}");
+
+    let tmp = tempfile::tempdir().unwrap();
+    keystore(tmp.path(), 66, &["/equiarm/env0/sim", "/equiarm/env0/policy", "/equiarm/trainer"]);
+    let (c, peer) = beside_an_intruder(66, 15, |ns, name| {
+        let enclave = format!("/equiarm{}/{name}", ns.trim_end_matches('/'));
+        RosNode::new(ns, name, &secured(66, tmp.path(), &enclave)).unwrap()
+    })
+    .await;
+    eprintln!("plain nodes: {plain_counts:?}, peer {plain_peer}\nsecured nodes: {c:?}, peer {peer}");
+    assert!(c.cmds >= 5 && c.obs >= 5 && c.transitions >= 5 && c.weights >= 5, "the secured nodes themselves: {c:?}");
+    assert_eq!((c.forged_cmds, c.forged_transitions, c.forged_weights), (0, 0, 0), "forgeries reached a node: {c:?}");
+    for topic in ["rt/env0/observation", "rt/transitions", "rt/policy/weights"] {
+        assert_eq!(peer["received"][topic].as_u64(), Some(0), "the plain peer received {topic}: {peer}");
+    }
+    for topic in ["rt/env0/gripper_cmd", "rt/transitions", "rt/policy/weights"] {
+        assert!(peer["sent"][topic].as_u64() > Some(0), "{peer}");
+        assert_eq!(
+            peer["matched"][topic].as_u64(),
+            Some(0),
+            "a secured reader matched the peer's {topic} writer: {peer}"
+        );
+    }
+}
+
+/// Every frame on the network namespace's interfaces (only `lo` here) while it runs, through a raw
+/// packet socket (the test command runs these tests as root of a private network namespace).
+struct Capture {
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: std::thread::JoinHandle<Vec<u8>>,
+}
+
+impl Capture {
+    fn start() -> Self {
+        use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
+        let proto = i32::from((libc::ETH_P_ALL as u16).to_be());
+        // SAFETY: plain socket(2); the descriptor is owned (and closed) by `fd` from here on.
+        let raw = unsafe { libc::socket(libc::AF_PACKET, libc::SOCK_RAW, proto) };
+        assert!(raw >= 0, "a raw packet socket: {}", std::io::Error::last_os_error());
+        let fd = unsafe { OwnedFd::from_raw_fd(raw) };
+        let timeout = libc::timeval { tv_sec: 0, tv_usec: 100_000 };
+        // SAFETY: a valid descriptor and a timeval of the size given.
+        let set = unsafe {
+            libc::setsockopt(
+                fd.as_raw_fd(),
+                libc::SOL_SOCKET,
+                libc::SO_RCVTIMEO,
+                (&raw const timeout).cast(),
+                size_of::<libc::timeval>() as libc::socklen_t,
+            )
+        };
+        assert_eq!(set, 0, "SO_RCVTIMEO: {}", std::io::Error::last_os_error());
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = stop.clone();
+        let thread = std::thread::spawn(move || {
+            let (mut all, mut buf) = (Vec::new(), vec![0u8; 1 << 16]);
+            while !flag.load(std::sync::atomic::Ordering::Relaxed) && all.len() < 256 << 20 {
+                // SAFETY: `buf` is writable for its length.
+                let n = unsafe { libc::recv(fd.as_raw_fd(), buf.as_mut_ptr().cast(), buf.len(), 0) };
+                if n > 0 {
+                    all.extend_from_slice(&buf[..n as usize]);
+                }
+            }
+            all
+        });
+        Capture { stop, thread }
+    }
+
+    fn finish(self) -> Vec<u8> {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        self.thread.join().unwrap()
+    }
+}
+
+/// How many of `needles` occur in `hay`.
+fn found(hay: &[u8], needles: &[Vec<u8>]) -> usize {
+    needles.iter().filter(|n| hay.windows(n.len()).any(|w| w == &n[..])).count()
+}
+
+/// A sim publishes a known Transition and 152-pixel Observation every 100 ms for `secs`, to a trainer
+/// and a policy (nodes made by `node`), while the loopback is captured: (Transitions and Observations
+/// received, the capture).
+async fn captured(
+    secs: u64,
+    node: impl Fn(&str, &str) -> RosNode,
+    transition: &Transition,
+    obs: &Observation,
+) -> (usize, usize, Vec<u8>) {
+    let capture = Capture::start();
+    let (mut sim, mut policy, mut trainer) = (node("/env0", "sim"), node("/env0", "policy"), node("/", "trainer"));
+    let obs_pub = sim.publisher::<Observation>("observation", qos::command()).unwrap();
+    let trans_pub = sim.publisher::<Transition>("/transitions", qos::stream(100)).unwrap();
+    let obs_sub = policy.subscription::<Observation>("observation", qos::command()).unwrap();
+    let trans_sub = trainer.subscription::<Transition>("/transitions", qos::stream(100)).unwrap();
+    let (mut n_trans, mut n_obs) = (0, 0);
+    let end = Instant::now() + Duration::from_secs(secs);
+    while Instant::now() < end {
+        trans_pub.publish(transition.clone()).await.unwrap();
+        obs_pub.publish(obs.clone()).await.unwrap();
+        while let Ok(Some(_)) = trans_sub.recv_timeout(Duration::from_millis(50)).await {
+            n_trans += 1;
+        }
+        while let Ok(Some(_)) = obs_sub.recv_timeout(Duration::from_millis(50)).await {
+            n_obs += 1;
+        }
+    }
+    drop((sim, policy, trainer));
+    (n_trans, n_obs, capture.finish())
+}
+
+/// A capture of the loopback traffic: the plain nodes' Transitions (a recognisable reward) and frame
+/// bytes are there in plaintext; the secured nodes', exchanged the same way, are not.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_capture_of_the_loopback_holds_no_plaintext_of_secured_samples() {
+    let transition = Transition {
+        env: "env0".into(),
+        episode: 3,
+        step: 17,
+        obs_seq: 41,
+        next_obs_seq: 42,
+        reward: 0.123_456_79,
+        action: command_typical(),
+        ..Default::default()
+    };
+    let obs = observation(7, 152, 3);
+    // the Transition's body from its action on (its reward included), and 32-byte windows of the
+    // Observation's frame planes
+    let t = equiarm_msgs::cdr::encode(&transition).unwrap();
+    let mut needles = vec![t[t.len() - 40..].to_vec()];
+    let o = equiarm_msgs::cdr::encode(&obs).unwrap();
+    needles.extend((1..8).map(|k| o[k * o.len() / 8..][..32].to_vec()));
+
+    let (n_trans, n_obs, plain_capture) =
+        captured(6, |ns, name| RosNode::new(ns, name, &plain(67)).unwrap(), &transition, &obs).await;
+    assert!(n_trans > 0 && n_obs > 0, "the plain nodes exchanged {n_trans} transitions, {n_obs} observations");
+    let in_plain = found(&plain_capture, &needles);
+    assert!(
+        found(&plain_capture, &needles[..1]) == 1 && in_plain >= 4,
+        "the capture of plain nodes should show the payloads ({in_plain} of {} found in {} bytes)",
+        needles.len(),
+        plain_capture.len()
+    );
+
+    let tmp = tempfile::tempdir().unwrap();
+    keystore(tmp.path(), 68, &["/equiarm/env0/sim", "/equiarm/env0/policy", "/equiarm/trainer"]);
+    let (n_trans, n_obs, secured_capture) = captured(
+        12,
+        |ns, name| {
+            let enclave = format!("/equiarm{}/{name}", ns.trim_end_matches('/'));
+            RosNode::new(ns, name, &secured(68, tmp.path(), &enclave)).unwrap()
+        },
+        &transition,
+        &obs,
+    )
+    .await;
+    eprintln!(
+        "plain: {in_plain} of {} payload windows in {} captured bytes; secured: {n_trans} transitions, {n_obs} observations received, {} bytes captured",
+        needles.len(),
+        plain_capture.len(),
+        secured_capture.len()
+    );
+    assert!(n_trans >= 5 && n_obs >= 5, "the secured nodes exchanged only {n_trans} transitions, {n_obs} observations");
+    assert_eq!(found(&secured_capture, &needles), 0, "plaintext of a secured sample on the wire");
 }
 
 /// The policy's permissions do not include publishing weights: the node cannot create the writer.

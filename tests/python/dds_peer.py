@@ -21,6 +21,11 @@ the wire. Every loop is bounded in count and time.
                                          at RATE Hz (default 10), as env0 with seqs from 2^40 (no
                                          real frame's) in episode 2^20 (past the expert episodes,
                                          so a policy decodes the frame)
+    dds_peer.py intrude DOMAIN SECONDS   a plain participant beside a secured suite: subscribe to
+                                         env0's observations, /transitions and /policy/weights,
+                                         publish forged gripper commands (env0), transitions (reward
+                                         FORGED_REWARD) and weights (run FORGED_RUN) at 10 Hz; print
+                                         what it received and sent and how many readers matched
 """
 
 import json
@@ -227,7 +232,55 @@ def oversized(domain: int, seconds: float, topic: str = "rt/env0/observation", r
     emit(event="sent", count=n, matched=len(writer.get_matched_subscriptions()))
 
 
+# what the intruder's forged samples carry, so that a receiver can tell them from the real ones
+FORGED_REWARD = 1234.5
+FORGED_RUN = "intruder"
+LATCHED = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.TransientLocal,
+              Policy.History.KeepLast(1), Policy.DataRepresentation(use_cdrv0_representation=True))
+
+
+def not_local(qos: Qos) -> Qos:
+    """`qos`, ignoring this process's own endpoints (the intruder's readers must not count its writes)."""
+    return Qos(*qos, Policy.IgnoreLocal.Process)
+
+
+def intrude(domain: int, seconds: float):
+    dp = DomainParticipant(domain)
+    listen = {"rt/env0/observation": (idl.Observation, RCLPY_DEFAULT), "rt/transitions": (idl.Transition, RCLPY_DEFAULT),
+              "rt/policy/weights": (idl.PolicyWeights, LATCHED)}
+    topics = {}  # one Topic per name in this participant, shared by its reader and writer
+
+    def topic(name, cls):
+        return topics.setdefault(name, Topic(dp, name, cls))
+
+    readers = {name: DataReader(dp, topic(name, cls), qos=not_local(qos)) for name, (cls, qos) in listen.items()}
+    forged = {
+        "rt/env0/gripper_cmd": (idl.GripperCommand, RCLPY_DEFAULT, golden.command_special()),
+        "rt/transitions": (idl.Transition, RCLPY_DEFAULT,
+                           idl.Transition(env="env0", episode=1, step=1, obs_seq=1, next_obs_seq=2,
+                                          reward=FORGED_REWARD)),
+        "rt/policy/weights": (idl.PolicyWeights, LATCHED,
+                              idl.PolicyWeights(run_id=FORGED_RUN, version=10**6, updates=10**6, model="equi",
+                                                format="safetensors", data=bytes(64))),
+    }
+    writers = {name: DataWriter(dp, topic(name, cls), qos=not_local(qos)) for name, (cls, qos, _) in forged.items()}
+    got = {name: 0 for name in listen}
+    sent = {name: 0 for name in forged}
+    deadline = time.monotonic() + seconds
+    emit(event="ready")
+    while time.monotonic() < deadline:
+        for name, (_, _, value) in forged.items():
+            writers[name].write(value)
+            sent[name] += 1
+        for name, reader in readers.items():
+            got[name] += sum(1 for s in reader.take(N=100) if hasattr(s, "__dataclass_fields__"))
+        time.sleep(0.1)
+    matched = {name: len(w.get_matched_subscriptions()) for name, w in writers.items()}
+    emit(event="done", received=got, sent=sent, matched=matched)
+
+
 if __name__ == "__main__":
     mode, domain, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
-    modes = {"receive": receive, "send": send, "send-bad": send_bad, "clock": clock, "oversized": oversized}
+    modes = {"receive": receive, "send": send, "send-bad": send_bad, "clock": clock, "oversized": oversized,
+             "intrude": intrude}
     modes[mode](domain, seconds, *sys.argv[4:])
