@@ -269,15 +269,17 @@ async fn a_plain_cyclone_peer_sees_nothing_and_reaches_nobody() {
     }
 }
 
-/// Every frame on the network namespace's interfaces (only `lo` here) while it runs, through a raw
-/// packet socket (the test command runs these tests as root of a private network namespace).
+/// The UDP payloads to one DDS domain's ports (RTPS: 7400 + 250 × domain and the 250 above) on the
+/// network namespace's interfaces (only `lo` here) while it runs, through a raw packet socket (the
+/// test command runs these tests as root of a private network namespace; other tests' domains are
+/// left out).
 struct Capture {
     stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
     thread: std::thread::JoinHandle<Vec<u8>>,
 }
 
 impl Capture {
-    fn start() -> Self {
+    fn start(domain: u16) -> Self {
         use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
         let proto = i32::from((libc::ETH_P_ALL as u16).to_be());
         // SAFETY: plain socket(2); the descriptor is owned (and closed) by `fd` from here on.
@@ -298,13 +300,15 @@ impl Capture {
         assert_eq!(set, 0, "SO_RCVTIMEO: {}", std::io::Error::last_os_error());
         let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         let flag = stop.clone();
+        let base = 7400 + 250 * domain;
+        let ports = base..base + 250;
         let thread = std::thread::spawn(move || {
             let (mut all, mut buf) = (Vec::new(), vec![0u8; 1 << 16]);
             while !flag.load(std::sync::atomic::Ordering::Relaxed) && all.len() < 256 << 20 {
                 // SAFETY: `buf` is writable for its length.
                 let n = unsafe { libc::recv(fd.as_raw_fd(), buf.as_mut_ptr().cast(), buf.len(), 0) };
-                if n > 0 {
-                    all.extend_from_slice(&buf[..n as usize]);
+                if let Some(payload) = udp_payload(&buf[..n.max(0) as usize], ports.clone()) {
+                    all.extend_from_slice(payload);
                 }
             }
             all
@@ -318,21 +322,31 @@ impl Capture {
     }
 }
 
+/// The payload of an Ethernet frame holding an IPv4 UDP datagram to a port in `ports`.
+fn udp_payload(frame: &[u8], ports: std::ops::Range<u16>) -> Option<&[u8]> {
+    let ip = frame.get(14..).filter(|_| frame.get(12..14) == Some(&[0x08, 0x00]))?;
+    let ihl = usize::from(ip.first()? & 0x0f) * 4;
+    let udp = ip.get(ihl..).filter(|_| ip.get(9) == Some(&17))?;
+    let port = u16::from_be_bytes([*udp.get(2)?, *udp.get(3)?]);
+    ports.contains(&port).then(|| udp.get(8..)).flatten()
+}
+
 /// How many of `needles` occur in `hay`.
 fn found(hay: &[u8], needles: &[Vec<u8>]) -> usize {
     needles.iter().filter(|n| hay.windows(n.len()).any(|w| w == &n[..])).count()
 }
 
 /// A sim publishes a known Transition and 152-pixel Observation every 100 ms for `secs`, to a trainer
-/// and a policy (nodes made by `node`), while the loopback is captured: (Transitions and Observations
+/// and a policy (nodes made by `node`, on `domain`), while the loopback is captured: (Transitions and Observations
 /// received, the capture).
 async fn captured(
+    domain: u16,
     secs: u64,
     node: impl Fn(&str, &str) -> RosNode,
     transition: &Transition,
     obs: &Observation,
 ) -> (usize, usize, Vec<u8>) {
-    let capture = Capture::start();
+    let capture = Capture::start(domain);
     let (mut sim, mut policy, mut trainer) = (node("/env0", "sim"), node("/env0", "policy"), node("/", "trainer"));
     let obs_pub = sim.publisher::<Observation>("observation", qos::command()).unwrap();
     let trans_pub = sim.publisher::<Transition>("/transitions", qos::stream(100)).unwrap();
@@ -377,7 +391,7 @@ async fn a_capture_of_the_loopback_holds_no_plaintext_of_secured_samples() {
     needles.extend((1..8).map(|k| o[k * o.len() / 8..][..32].to_vec()));
 
     let (n_trans, n_obs, plain_capture) =
-        captured(6, |ns, name| RosNode::new(ns, name, &plain(67)).unwrap(), &transition, &obs).await;
+        captured(67, 6, |ns, name| RosNode::new(ns, name, &plain(67)).unwrap(), &transition, &obs).await;
     assert!(n_trans > 0 && n_obs > 0, "the plain nodes exchanged {n_trans} transitions, {n_obs} observations");
     let in_plain = found(&plain_capture, &needles);
     assert!(
@@ -390,6 +404,7 @@ async fn a_capture_of_the_loopback_holds_no_plaintext_of_secured_samples() {
     let tmp = tempfile::tempdir().unwrap();
     keystore(tmp.path(), 68, &["/equiarm/env0/sim", "/equiarm/env0/policy", "/equiarm/trainer"]);
     let (n_trans, n_obs, secured_capture) = captured(
+        68,
         12,
         |ns, name| {
             let enclave = format!("/equiarm{}/{name}", ns.trim_end_matches('/'));
@@ -423,6 +438,56 @@ async fn a_node_cannot_publish_what_its_permissions_do_not_grant() {
     assert!(e.contains("/policy/weights") && e.contains("security"), "{e}");
     // What it is granted works.
     policy.publisher::<GripperCommand>("gripper_cmd", qos::command()).unwrap();
+}
+
+/// A participant with a valid identity from the run's CA that grants itself permissions (signed by a
+/// permissions CA of its own, with a governance to match): its own participant lets it create a
+/// weights writer, the run's nodes refuse it: its weights reach no policy, and it receives none of
+/// the trainer's, while the trainer's reach the policy.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_valid_identity_with_self_granted_permissions_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (run, own, forged) = (tmp.path().join("run"), tmp.path().join("own"), tmp.path().join("forged"));
+    let ks = keystore(&run, 69, &["/equiarm/trainer", "/equiarm/env0/policy", "/equiarm/eval/policy"]);
+    let mine = keystore(&own, 69, &[]);
+    let name = EnclaveName::parse("/equiarm/eval/policy").unwrap();
+    mine.create_enclave(&name, 69, &Grant::everything()).unwrap();
+    // its own enclave's documents and CA for permissions; the run's certificate, key and identity CA
+    let dir = forged.join("enclaves/equiarm/eval/policy");
+    std::fs::create_dir_all(&dir).unwrap();
+    for f in ["governance.p7s", "permissions.p7s", "permissions_ca.cert.pem"] {
+        std::fs::copy(mine.enclave_dir(&name).join(f), dir.join(f)).unwrap();
+    }
+    for f in ["cert.pem", "key.pem", "identity_ca.cert.pem"] {
+        std::fs::copy(ks.enclave_dir(&name).join(f), dir.join(f)).unwrap();
+    }
+    let mut intruder = RosNode::new("/eval", "policy", &secured(69, &forged, "/equiarm/eval/policy")).unwrap();
+    let forged_pub =
+        intruder.publisher::<PolicyWeights>("/policy/weights", qos::latched()).expect("granted by its own CA");
+    let spy = intruder.subscription::<PolicyWeights>("/policy/weights", qos::latched()).unwrap();
+    let mut trainer = RosNode::new("/", "trainer", &secured(69, &run, "/equiarm/trainer")).unwrap();
+    let mut policy = RosNode::new("/env0", "policy", &secured(69, &run, "/equiarm/env0/policy")).unwrap();
+    let weights_pub = trainer.publisher::<PolicyWeights>("/policy/weights", qos::latched()).unwrap();
+    let weights_sub = policy.subscription::<PolicyWeights>("/policy/weights", qos::latched()).unwrap();
+    let (mut real, mut fake, mut spied) = (0, 0, 0);
+    let end = Instant::now() + Duration::from_secs(15);
+    let mut version = 0;
+    while Instant::now() < end {
+        version += 1;
+        let w = |run: &str| PolicyWeights { run_id: run.into(), version, model: "equi".into(), ..Default::default() };
+        weights_pub.publish(w("suite")).await.unwrap();
+        forged_pub.publish(w(FORGED_RUN)).await.unwrap();
+        while let Ok(Some((w, _))) = weights_sub.recv_timeout(Duration::from_millis(50)).await {
+            *(if w.run_id == FORGED_RUN { &mut fake } else { &mut real }) += 1;
+        }
+        while let Ok(Some((w, _))) = spy.recv_timeout(Duration::from_millis(50)).await {
+            spied += usize::from(w.run_id != FORGED_RUN);
+        }
+    }
+    assert!(real >= 5, "the trainer's weights reached the policy only {real} times");
+    assert_eq!(fake, 0, "the self-granted weights reached the policy");
+    assert_eq!(spied, 0, "the intruder received the trainer's weights");
+    assert_eq!(forged_pub.subscription_count(&intruder), 1, "a reader besides the intruder's own matched its writer");
 }
 
 /// Under Enforce a node does not start on an enclave whose permissions were tampered with; the error
