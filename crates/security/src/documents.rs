@@ -10,8 +10,11 @@ const GOVERNANCE_SCHEMA: &str = "http://www.omg.org/spec/DDS-SECURITY/20170901/o
 const PERMISSIONS_SCHEMA: &str = "http://www.omg.org/spec/DDS-SECURITY/20170901/omg_shared_ca_permissions.xsd";
 
 /// The governance of a secured suite on `domain`: only authenticated participants may join; discovery
-/// and liveliness are encrypted, every RTPS message signed; every topic's data and metadata encrypted,
-/// and reading and writing checked against each participant's permissions (sros2's default).
+/// and liveliness are encrypted, every RTPS message signed; every topic's submessages (the samples
+/// they carry included) encrypted and authenticated, and reading and writing checked against each
+/// participant's permissions. sros2's default, except that a sample's payload is not encrypted a
+/// second time on its own (`data_protection_kind` NONE): RustDDS 0.15.1 fails to decrypt payloads
+/// of samples over 64 KB (docs/security.md), and the encrypted submessage holds the payload anyway.
 pub fn governance(domain: u16) -> String {
     format!(
         r#"<?xml version="1.0" encoding="UTF-8"?>
@@ -34,7 +37,7 @@ pub fn governance(domain: u16) -> String {
           <enable_read_access_control>true</enable_read_access_control>
           <enable_write_access_control>true</enable_write_access_control>
           <metadata_protection_kind>ENCRYPT</metadata_protection_kind>
-          <data_protection_kind>ENCRYPT</data_protection_kind>
+          <data_protection_kind>NONE</data_protection_kind>
         </topic_rule>
       </topic_access_rules>
     </domain_rule>

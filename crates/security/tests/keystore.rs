@@ -51,7 +51,9 @@ fn a_keystore_has_the_ros2_layout_and_its_enclaves_pass_the_checks() {
     let enclave = check_enclave(&dir, 7).unwrap();
     assert_eq!(enclave.subject, "CN=/equiarm/env0/sim");
     assert!(enclave.permissions.contains("<topic>rt/env0/observation</topic>"));
-    assert!(enclave.governance.contains("<data_protection_kind>ENCRYPT</data_protection_kind>"));
+    // every topic's submessages encrypted (the payload inside them; docs/security.md on why not twice)
+    assert!(enclave.governance.contains("<metadata_protection_kind>ENCRYPT</metadata_protection_kind>"));
+    assert!(enclave.governance.contains("<data_protection_kind>NONE</data_protection_kind>"));
     assert_eq!(ks.enclaves().unwrap(), vec![name("/equiarm/env0/sim")]);
     use std::os::unix::fs::PermissionsExt;
     assert_eq!(fs::metadata(dir.join("key.pem")).unwrap().permissions().mode() & 0o777, 0o600);
