@@ -27,13 +27,15 @@ Arguments: task, preset (reduced | reduced16 | paper), num_envs, seed, run_dir, 
 preset's), model (empty: the config's), config (empty: the preset's file), deterministic (true: the
 lock-step mode of `train.sh --deterministic`), equiarm (path of the
 binary; default `equiarm` on PATH), stamp_origin (`--stamp-origin` of every sim: `launch`, the
-default, is the launch's start time in whole seconds, one value for all, as train.sh gives). ROS_DOMAIN_ID and the other ROS variables of the environment
+default, is the launch's start time in whole seconds, one value for all, as train.sh gives), secure
+(true: DDS Security as `train.sh --secure`, docs/security.md). ROS_DOMAIN_ID and the other ROS variables of the environment
 apply to every process. Needs the `launch` package only (launch_ros is not used: no ROS package
 executables are involved); nothing is built here.
 """
 
 import json
 import os
+import subprocess
 import time
 
 from launch import LaunchDescription
@@ -57,6 +59,8 @@ ARGUMENTS = [
     ("equiarm", "equiarm", "path of the equiarm binary"),
     ("stamp_origin", "launch", "where the sims' stamps start: launch (the launch's start, the same for every sim, "
      "as train.sh), now (each sim's start), zero, or seconds since 1970"),
+    ("secure", "false", "true: DDS Security as train.sh --secure (the keystore ROS_SECURITY_KEYSTORE names, else "
+     "<run_dir>/keystore, made if missing; an enclave per node; Enforce)"),
 ]
 
 
@@ -124,13 +128,31 @@ def commands(args):
     return cmds
 
 
+def security(args):
+    """With secure:=true, as train.sh --secure (lib.sh's eqa_secure): the commands that make the keystore
+    (if it has no governance yet) and an enclave for each node, and the variables every process gets;
+    else nothing. Kept free of launch types, like `commands`."""
+    if str(args.get("secure", "false")).lower() not in ("1", "true", "yes"):
+        return [], {}
+    exe = args["equiarm"]
+    ks = os.path.abspath(os.environ.get("ROS_SECURITY_KEYSTORE") or os.path.join(args["run_dir"], "keystore"))
+    make = [] if os.path.exists(os.path.join(ks, "enclaves", "governance.p7s")) else [[exe, "security", "create-keystore", ks]]
+    enclaves = ["/equiarm/trainer", "/equiarm/equiarm_recorder", "/equiarm/eval/sim", "/equiarm/eval/policy"]
+    enclaves += [f"/equiarm/env{k}/{node}" for k in range(int(args["num_envs"])) for node in ("sim", "policy")]
+    make += [[exe, "security", "create-enclave", ks, e] for e in enclaves]
+    return make, {"ROS_SECURITY_KEYSTORE": ks, "ROS_SECURITY_ENABLE": "true", "ROS_SECURITY_STRATEGY": "Enforce"}
+
+
 def launch_setup(context, *_args, **_kwargs):
     args = {name: LaunchConfiguration(name).perform(context) for name, _, _ in ARGUMENTS}
     if args["stamp_origin"] == "launch":  # read once, so every sim's clock starts at the same time
         args["stamp_origin"] = str(int(time.time()))
+    make_keystore, secure_env = security(args)
+    for cmd in make_keystore:  # before any node starts: each checks its enclave as it joins
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     actions = []
     for name, cmd in commands(args):
-        extra = {}
+        extra = {"additional_env": secure_env} if secure_env else {}
         if name == "trainer":
             extra["on_exit"] = Shutdown(reason="the trainer finished")
         # SIGINT first (launch's default on shutdown): the recorder closes its bag, the trainer checkpoints.

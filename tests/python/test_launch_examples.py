@@ -334,6 +334,31 @@ def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
     assert abs(int(origin) - time.time()) < 600, origins
 
 
+def test_launch_file_secure_makes_the_keystore_and_secures_every_process(launch_file, tmp_path, monkeypatch):
+    """secure:=true as train.sh --secure: the run's keystore with an enclave per node (made with the
+    real binary), and every process started with the ROS 2 security variables (Enforce)."""
+    monkeypatch.delenv("ROS_SECURITY_KEYSTORE", raising=False)
+    run = tmp_path / "run"
+    _, procs = launch_file(num_envs="2", run_dir=str(run), equiarm=BIN, secure="true")
+    ks = run / "keystore"
+    listed = subprocess.run([BIN, "security", "list-enclaves", str(ks)], capture_output=True, text=True, check=True)
+    assert sorted(listed.stdout.split()) == sorted(
+        ["/equiarm/trainer", "/equiarm/equiarm_recorder", "/equiarm/eval/sim", "/equiarm/eval/policy",
+         "/equiarm/env0/sim", "/equiarm/env0/policy", "/equiarm/env1/sim", "/equiarm/env1/policy"])
+    for name, p in procs.items():
+        env = p.kwargs.get("additional_env", {})
+        assert env == {"ROS_SECURITY_KEYSTORE": str(ks), "ROS_SECURITY_ENABLE": "true",
+                       "ROS_SECURITY_STRATEGY": "Enforce"}, name
+    # a second launch reuses the keystore (the identities stay)
+    cert = (ks / "enclaves/equiarm/trainer/cert.pem").read_bytes()
+    launch_file(num_envs="2", run_dir=str(run), equiarm=BIN, secure="true")
+    assert (ks / "enclaves/equiarm/trainer/cert.pem").read_bytes() == cert
+    # without it, no security variables
+    _, plain = launch_file(num_envs="2", run_dir=str(tmp_path / "plain"), equiarm=BIN)
+    assert all("additional_env" not in p.kwargs for p in plain.values())
+    assert not (tmp_path / "plain" / "keystore").exists()
+
+
 def test_launch_file_deterministic_matches_train_sh(launch_file):
     _, procs = launch_file(num_envs="2", deterministic="true")
     assert "--deterministic" in procs["trainer"].kwargs["cmd"]
