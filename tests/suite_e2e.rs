@@ -80,6 +80,23 @@ impl Drop for KillOnPanic {
     }
 }
 
+/// The run learned over DDS: at least 20 transitions reached the trainer, and each of `policies`
+/// switched to weights the trainer broadcast (version 2 or later).
+fn learned(run_dir: &Path, policies: &[&str]) {
+    let trainer = log(run_dir, "trainer");
+    let received: u64 = trainer
+        .lines()
+        .find_map(|l| l.split("received ").nth(1)?.split(' ').next()?.parse().ok())
+        .unwrap_or_else(|| panic!("trainer log has no 'received N transitions':\n{trainer}"));
+    assert!(received >= 20, "only {received} transitions reached the trainer");
+    for p in policies {
+        let l = log(run_dir, p);
+        let newest =
+            l.lines().filter_map(|x| x.split("weights version ").nth(1)?.split(' ').next()?.parse::<u64>().ok()).max();
+        assert!(newest.unwrap_or(0) >= 2, "{p} never switched to broadcast weights:\n{l}");
+    }
+}
+
 fn bag_opens(bag: &Path) {
     let info = Command::new(bin()).args(["bag", "info"]).arg(bag).output().unwrap();
     assert!(info.status.success(), "bag info failed: {}", String::from_utf8_lossy(&info.stderr));
@@ -105,18 +122,7 @@ fn train_sh_runs_the_suite_to_the_end() {
         let l = log(&run_dir, sim);
         assert!(l.contains("camera elevation 60°") && l.contains("corruption random_reflection"), "{sim}:\n{l}");
     }
-    let trainer = log(&run_dir, "trainer");
-    let received: u64 = trainer
-        .lines()
-        .find_map(|l| l.split("received ").nth(1)?.split(' ').next()?.parse().ok())
-        .unwrap_or_else(|| panic!("trainer log has no 'received N transitions':\n{trainer}"));
-    assert!(received >= 20, "only {received} transitions reached the trainer");
-    for p in ["policy0", "policy1"] {
-        let l = log(&run_dir, p);
-        let newest =
-            l.lines().filter_map(|x| x.split("weights version ").nth(1)?.split(' ').next()?.parse::<u64>().ok()).max();
-        assert!(newest.unwrap_or(0) >= 2, "{p} never switched to broadcast weights:\n{l}");
-    }
+    learned(&run_dir, &["policy0", "policy1"]);
     assert!(run_dir.join("checkpoints/latest").is_file());
     assert!(run_dir.join("learning_curve.png").is_file());
     bag_opens(&run_dir.join("bag"));
@@ -165,17 +171,7 @@ fn the_secured_suite_learns_and_records() {
         let l = log(&run_dir, name);
         assert!(l.contains(&format!("security: enclave {enclave})")), "{name} did not join in {enclave}:\n{l}");
     }
-    let trainer = log(&run_dir, "trainer");
-    let received: u64 = trainer
-        .lines()
-        .find_map(|l| l.split("received ").nth(1)?.split(' ').next()?.parse().ok())
-        .unwrap_or_else(|| panic!("trainer log has no 'received N transitions':\n{trainer}"));
-    assert!(received >= 20, "only {received} transitions reached the trainer");
-    let newest = log(&run_dir, "policy0")
-        .lines()
-        .filter_map(|x| x.split("weights version ").nth(1)?.split(' ').next()?.parse::<u64>().ok())
-        .max();
-    assert!(newest.unwrap_or(0) >= 2, "policy0 never switched to broadcast weights");
+    learned(&run_dir, &["policy0", "policy1"]);
     bag_opens(&run_dir.join("bag"));
     let info = Command::new(bin()).args(["bag", "info"]).arg(run_dir.join("bag")).output().unwrap();
     let info = String::from_utf8_lossy(&info.stdout);

@@ -32,6 +32,8 @@ from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
+# EpisodeResult and its parts as in tests/python/equiarm_idl.py, declared again: that module is written
+# for the current binding (cyclonedds 11), whose IDL machinery the 0.10 binding lacks.
 from dataclasses import dataclass, field
 from cyclonedds.idl import IdlStruct
 from cyclonedds.idl.types import float32, int32, uint32, uint64
