@@ -30,6 +30,16 @@ fn secured(domain_id: u16, keystore: &Path, enclave: &str) -> RosOptions {
     }
 }
 
+/// Options for a node in the enclave its own name gives (`/equiarm` + the node's name, as rcl
+/// derives it) of `keystore` under Enforce.
+fn by_node_name(domain_id: u16, keystore: &Path) -> RosOptions {
+    RosOptions {
+        domain_id,
+        localhost_only: false,
+        security: Security::On { keystore: Some(keystore.into()), enforce: true, enclave_override: None },
+    }
+}
+
 fn plain(domain_id: u16) -> RosOptions {
     RosOptions { domain_id, ..Default::default() }
 }
@@ -309,11 +319,8 @@ async fn a_plain_cyclone_peer_sees_nothing_and_reaches_nobody() {
 
     let tmp = tempfile::tempdir().unwrap();
     keystore(tmp.path(), 66, &["/equiarm/env0/sim", "/equiarm/env0/policy", "/equiarm/trainer"]);
-    let (c, peer) = beside_an_intruder(66, 15, |ns, name| {
-        let enclave = format!("/equiarm{}/{name}", ns.trim_end_matches('/'));
-        RosNode::new(ns, name, &secured(66, tmp.path(), &enclave)).unwrap()
-    })
-    .await;
+    let (c, peer) =
+        beside_an_intruder(66, 15, |ns, name| RosNode::new(ns, name, &by_node_name(66, tmp.path())).unwrap()).await;
     eprintln!("plain nodes: {plain_counts:?}, peer {plain_peer}\nsecured nodes: {c:?}, peer {peer}");
     assert!(c.cmds >= 5 && c.obs >= 5 && c.transitions >= 5 && c.weights >= 5, "the secured nodes themselves: {c:?}");
     assert_eq!((c.forged_cmds, c.forged_transitions, c.forged_weights), (0, 0, 0), "forgeries reached a node: {c:?}");
@@ -475,16 +482,8 @@ async fn a_capture_of_the_loopback_holds_no_plaintext_of_secured_samples() {
 
     let tmp = tempfile::tempdir().unwrap();
     keystore(tmp.path(), 68, &["/equiarm/env0/sim", "/equiarm/env0/policy", "/equiarm/trainer"]);
-    let (n, secured_capture) = captured(
-        68,
-        12,
-        |ns, name| {
-            let enclave = format!("/equiarm{}/{name}", ns.trim_end_matches('/'));
-            RosNode::new(ns, name, &secured(68, tmp.path(), &enclave)).unwrap()
-        },
-        samples,
-    )
-    .await;
+    let (n, secured_capture) =
+        captured(68, 12, |ns, name| RosNode::new(ns, name, &by_node_name(68, tmp.path())).unwrap(), samples).await;
     eprintln!(
         "plain: {in_plain} of {} payload windows in {} captured bytes; secured: at least {n} of each sample received, {} bytes captured",
         needles.len(),
