@@ -77,10 +77,11 @@ enum Command {
     )]
     Rotest(equiarm_rotest::cli::RotestCommand),
     /// The paper's RL experiments as named grids of in-process runs (experiments/NAME.toml,
-    /// docs/experiment_runner.md): run them a few at a time, resume after an interruption, report.
+    /// docs/experiment_runner.md): run them a few at a time, resume after an interruption, report;
+    /// check the paper's claims on the reports (docs/results/claims.toml).
     #[command(
         subcommand,
-        after_help = "Examples:\n  equiarm experiment run tasks --parallel 2\n  equiarm experiment status tasks\n  equiarm experiment report tasks"
+        after_help = "Examples:\n  equiarm experiment run tasks --parallel 2\n  equiarm experiment status tasks\n  equiarm experiment report tasks\n  equiarm experiment claims"
     )]
     Experiment(equiarm_experiment::cli::ExperimentCommand),
     /// Times the learner on a device beside the CPU (median SAC update and batch-1 action per

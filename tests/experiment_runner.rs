@@ -161,3 +161,35 @@ fn an_uncreatable_runs_directory_is_not_reported_as_a_busy_grid() {
     assert!(err.contains("cannot claim grid tiny") && err.contains("Not a directory"), "{err}");
     assert!(!err.contains("another runner"), "{err}");
 }
+
+/// Issue 58: the claims table on docs/results/README.md is what `equiarm experiment claims` makes
+/// from the committed claims file and archives, and nothing else on the page changes.
+#[test]
+fn the_committed_claims_table_regenerates_from_the_committed_archives() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let committed = std::fs::read_to_string(root.join("docs/results/README.md")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let page = dir.path().join("README.md");
+    std::fs::write(&page, &committed).unwrap();
+    let out = equiarm().current_dir(root).args(["experiment", "claims", "--out"]).arg(&page).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let made = std::fs::read_to_string(&page).unwrap();
+    assert_eq!(made, committed, "run `equiarm experiment claims` and commit docs/results/README.md");
+    assert!(made.contains("| Equi SAC beats CNN SAC: block in bowl (10,000 updates) |"));
+
+    // a claims file that does not parse is named, with the line
+    let bad = dir.path().join("claims.toml");
+    std::fs::write(&bad, "[[claim]]\nclaim = \"x\"\ntest = \"better\"\n").unwrap();
+    let out = equiarm()
+        .current_dir(root)
+        .args(["experiment", "claims", "--file"])
+        .arg(&bad)
+        .arg("--out")
+        .arg(&page)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("claims.toml") && err.contains("better"), "{err}");
+    assert_eq!(std::fs::read_to_string(&page).unwrap(), made, "the page is left as it was");
+}

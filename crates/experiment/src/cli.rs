@@ -1,4 +1,4 @@
-//! The `equiarm experiment` subcommands (clap derive): `run`, `status`, `report`, and the internal
+//! The `equiarm experiment` subcommands (clap derive): `run`, `status`, `report`, `claims`, and the internal
 //! `run-one` each run's child process executes.
 
 use std::path::{Path, PathBuf};
@@ -57,6 +57,22 @@ pub enum ExperimentCommand {
         #[command(flatten)]
         at: Where,
         /// Output directory (default: docs/results/NAME).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Check the paper's claims (a TOML file of claims, each naming two cells of a grid) on the
+    /// archived runs of the reports, and write the table between its markers in a page.
+    #[command(
+        after_help = "Example:\n  equiarm experiment claims   # docs/results/claims.toml into docs/results/README.md"
+    )]
+    Claims {
+        /// The claims (default: ARCHIVE/claims.toml).
+        #[arg(long)]
+        file: Option<PathBuf>,
+        /// Where the reports are (each GRID/runs.json).
+        #[arg(long, default_value = "docs/results")]
+        archive: PathBuf,
+        /// The page the table goes into, between its claims table markers (default: ARCHIVE/README.md).
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -191,6 +207,17 @@ pub fn run(cmd: ExperimentCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
             for f in crate::report::write(&grid, &at.runs(&grid), &archive, &out, &at.report_command(&out))? {
                 println!("{}", f.display());
             }
+            // the claims table reads the archive just written: keep it in step
+            let (claims, page) = (at.archive.join("claims.toml"), at.archive.join("README.md"));
+            if claims.is_file() && page.is_file() {
+                println!("{}", crate::claims::write(&claims, &at.archive, &page)?.display());
+            }
+            Ok(0)
+        }
+        ExperimentCommand::Claims { file, archive, out } => {
+            let file = file.unwrap_or_else(|| archive.join("claims.toml"));
+            let out = out.unwrap_or_else(|| archive.join("README.md"));
+            println!("{}", crate::claims::write(&file, &archive, &out)?.display());
             Ok(0)
         }
         ExperimentCommand::RunOne { dir, heldout_episodes, checkpoint_minutes } => {

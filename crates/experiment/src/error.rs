@@ -21,6 +21,15 @@ pub enum ExperimentError {
         /// What is wrong and the way out.
         message: String,
     },
+    /// The claims file does not read, or a claim in it names no cell; or the page for the claims
+    /// table has no place for it.
+    #[error("claims {path}: {message}")]
+    Claims {
+        /// The claims file or the page.
+        path: PathBuf,
+        /// What is wrong, naming the claim.
+        message: String,
+    },
     /// Reading or writing a file failed (the file, and the cause).
     #[error(transparent)]
     Io(#[from] equiarm_types::files::FileError),

@@ -2,8 +2,10 @@
 //! × camera view × corruption × seed) read from `experiments/NAME.toml` ([`grid`]), run a few at a
 //! time as child processes that survive interruption ([`runner`]), and reported from the run
 //! directories alone as a Markdown table and learning-curve figures ([`report`]). The command line
-//! is `equiarm experiment run|status|report NAME` ([`cli`]).
+//! is `equiarm experiment run|status|report NAME` ([`cli`]); `equiarm experiment claims` checks the
+//! paper's claims on the reports' archives ([`claims`]).
 
+pub mod claims;
 pub mod cli;
 pub mod error;
 pub mod grid;

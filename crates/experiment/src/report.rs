@@ -1,7 +1,7 @@
 //! The report of a grid, from its run directories alone: `OUT/README.md` with one table row per
-//! task × view × corruption × variant (mean ± standard error over the seeds of the last evaluation
-//! during training and of the held-out evaluation, success rate beside discounted return, the
-//! paper's figure where the grid gives it) and, per task × view × corruption, two figures of the
+//! task × view × corruption × variant (mean ± standard error over the seeds of the held-out
+//! evaluation and of the last evaluation during training, discounted return first as the paper plots
+//! it, success rate beside it, the paper's figure where the grid gives it) and, per task × view × corruption, two figures of the
 //! greedy evaluations against updates (success rate, discounted return), one curve per variant:
 //! the mean over seeds with a band of ± one standard error. Where a task × corruption has finished
 //! runs at two or more camera views, a table and two figures of the held-out results against the
@@ -163,18 +163,18 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
     md += &format!("Scene: {}.\n\n", scene_of(grid, out));
     md += &format!(
         "Regenerate this page from the run directories with `{command}`. Grid: [`{}`]({}). Base preset `{}`; \
-         every run is one `equiarm train --in-process` run at one thread. Success rate and discounted return \
-         (γ = 0.99) of the greedy policy, mean ± standard error over the finished seeds (the mean alone \
-         below three seeds): at the last \
-         evaluation during training (its episodes are the same at every evaluation) and over {} held-out \
-         episodes of the final weights (episodes no evaluation saw). The paper's figure is its discounted \
-         return at the last training step (docs/paper.md §6, read off its plots).\n\n",
+         every run is one `equiarm train --in-process` run at one thread. The headline is what the paper \
+         plots: the discounted return (γ = 0.99) of the greedy policy at the end of training, here over {} \
+         held-out episodes of the final weights (episodes no evaluation saw), success rate beside it; mean ± \
+         standard error over the finished seeds (the mean alone below three seeds). The last evaluation \
+         during training (its episodes are the same at every evaluation) follows. The paper's figure is its \
+         discounted return at the last training step (docs/paper.md §6, read off its plots, 4 seeds).\n\n",
         grid.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
         relative_link(out, &grid.path),
         grid.preset.name(),
         grid.heldout_episodes
     );
-    md += "| task | view | corruption | variant | finished | updates | last evaluation: success | disc. return | held-out: success | disc. return | held-out success per seed | paper (disc. return) | training time per run |\n";
+    md += "| task | view | corruption | variant | finished | updates | **held-out: disc. return** | success | held-out disc. return per seed | paper (disc. return) | last evaluation: disc. return | success | training time per run |\n";
     md += "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     for ((task, view, corruption), by_variant) in &groups {
         for (vi, runs_of) in by_variant {
@@ -185,7 +185,7 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
             let cell = |v: Vec<f64>| stat(&v);
             let mut per_seed: Vec<(u64, f64)> = runs_of
                 .iter()
-                .filter_map(|r| r.result.as_ref().map(|x| (r.cell.seed, x.heldout.success_rate)))
+                .filter_map(|r| r.result.as_ref().map(|x| (r.cell.seed, x.heldout.discounted_return)))
                 .collect();
             per_seed.sort_by_key(|p| p.0);
             let per_seed = per_seed.iter().map(|(s, x)| format!("s{s} {x:.2}")).collect::<Vec<_>>().join(", ");
@@ -194,15 +194,15 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
             let paper = grid.paper.get(&format!("{task}/{name}")).map_or("–".to_string(), |p| format!("{p:.2}"));
             let time = cell(pick(&|r| Some(r.train_seconds / 60.0))) + " min";
             md += &format!(
-                "| {task} | {view} | {corruption} | {} | {} of {} | {updates} | {} | {} | {} | {} | {} | {paper} | {} |\n",
+                "| {task} | {view} | {corruption} | {} | {} of {} | {updates} | **{}** | {} | {} | {paper} | {} | {} | {} |\n",
                 variant.map_or("?", |v| v.label),
                 done.len(),
                 runs_of.len(),
-                cell(pick(&|r| r.last_eval.as_ref().map(|e| e.success_rate))),
-                cell(pick(&|r| r.last_eval.as_ref().map(|e| e.discounted_return))),
-                cell(pick(&|r| Some(r.heldout.success_rate))),
                 cell(pick(&|r| Some(r.heldout.discounted_return))),
+                cell(pick(&|r| Some(r.heldout.success_rate))),
                 if per_seed.is_empty() { "–".into() } else { per_seed },
+                cell(pick(&|r| r.last_eval.as_ref().map(|e| e.discounted_return))),
+                cell(pick(&|r| r.last_eval.as_ref().map(|e| e.success_rate))),
                 if done.is_empty() { "–".into() } else { time },
             );
         }
@@ -228,7 +228,7 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
     let swept = by_view(&views);
     if !swept.is_empty() {
         md += "\n## By camera view\n\nHeld-out evaluation of the final weights at each camera elevation, for each task and \
-               corruption with finished runs at two or more views: success rate (discounted return), mean ± standard \
+               corruption with finished runs at two or more views: discounted return (success rate), mean ± standard \
                error over the finished seeds (n; the mean alone below three seeds).\n\n";
     }
     for ((task, corruption), by_variant) in &swept {
@@ -247,7 +247,7 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
                 match points.iter().find(|p| &p.view == view) {
                     Some(p) => {
                         md +=
-                            &format!(" {} ({}; n={}) |", stat(&p.success), stat(&p.discounted_return), p.success.len());
+                            &format!(" {} ({}; n={}) |", stat(&p.discounted_return), stat(&p.success), p.success.len());
                     }
                     None => md += " – |",
                 }
@@ -278,7 +278,7 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
             files.push(draw(out, &format!("{stem}-{metric}.png"), chart, metric, &series)?);
         }
         md += &format!(
-            "\n![{task}, {corruption}, by view]({stem}-success.png)\n![{task}, {corruption}, by view: discounted return]({stem}-return.png)\n\n"
+            "\n![{task}, {corruption}, by view: discounted return]({stem}-return.png)\n![{task}, {corruption}, by view: success rate]({stem}-success.png)\n\n"
         );
     }
     md += "\n## Learning curves\n\nGreedy evaluations during training, mean ± one standard error over seeds (a seed counts at an update count once it has evaluated there).\n\n";
@@ -309,7 +309,7 @@ pub fn write(grid: &Grid, runs: &Path, archive: &Archive, out: &Path, command: &
             files.push(draw(out, &format!("{stem}-{metric}.png"), chart, metric, &series)?);
         }
         md += &format!(
-            "![{task}, {view}, {corruption}]({stem}-success.png)\n![{task}, {view}, {corruption}: discounted return]({stem}-return.png)\n\n"
+            "![{task}, {view}, {corruption}: discounted return]({stem}-return.png)\n![{task}, {view}, {corruption}: success rate]({stem}-success.png)\n\n"
         );
     }
     let readme = out.join("README.md");

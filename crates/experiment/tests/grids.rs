@@ -34,3 +34,25 @@ fn every_grid_reads_and_shared_runs_agree() {
     }
     assert!(shared > 0, "the baselines and reflection grids share the tasks grid's runs");
 }
+
+/// Every cell a claim of docs/results/claims.toml compares is a cell of the grid it names, so that
+/// a claim never reads "not run yet" for want of a typo.
+#[test]
+fn every_claim_names_cells_of_its_grids() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let claims = equiarm_experiment::claims::read(&root.join("docs/results/claims.toml")).unwrap();
+    assert!(claims.len() >= 10, "{} claims", claims.len());
+    for c in &claims {
+        for r in [&c.a, &c.b] {
+            let (grid, cell) = equiarm_experiment::claims::cell_ref(r).unwrap();
+            let g = Grid::read(&root.join("experiments").join(format!("{grid}.toml")))
+                .unwrap_or_else(|e| panic!("claim {}: {e}", c.claim));
+            let cells: Vec<PathBuf> = g.cells().iter().map(|x| x.rel_dir()).collect();
+            assert!(
+                cells.iter().any(|d| d.parent() == Some(std::path::Path::new(cell))),
+                "claim {}: {cell} is not a cell of grid {grid}",
+                c.claim
+            );
+        }
+    }
+}
