@@ -51,6 +51,21 @@ pub fn bound<L: AsRef<[u8]>>(orbits: &[L]) -> f64 {
     orbits.iter().map(|o| majority_fraction(o.as_ref())).sum::<f64>() / orbits.len() as f64
 }
 
+/// The bound for a classifier invariant only to the subgroup of C8 of `order` (1, 2, 4 or 8: the
+/// rotations by multiples of 360°/`order`), with the rotation drawn uniformly: each pair's scene
+/// under each of the 8 rotations, its orbit the `order` members that subgroup reaches. Under
+/// invert-label already C2 (the 180° turn alone, which swaps "duck 0 left of duck 1") gives 0.625:
+/// that bound binds every network exactly invariant to 180°, as the C8 network on pixels is.
+pub fn subgroup_bound(metas: &[PairMeta], setting: &Corruptions, order: usize) -> f64 {
+    let step = 8 / order.clamp(1, 8);
+    let orbits: Vec<Vec<u8>> = metas
+        .iter()
+        .flat_map(|m| (0..8u8).map(move |idx| orbit_labels(m, idx, setting)))
+        .map(|o| o.iter().step_by(step).copied().collect())
+        .collect();
+    bound(&orbits)
+}
+
 /// The bound of a dataset, two ways.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DatasetBound {
@@ -82,5 +97,30 @@ mod tests {
         assert_eq!(majority_fraction(&[0, 1, 2, 3, 4, 5, 6, 7]), 0.125);
         assert_eq!(bound(&[[0u8, 0], [0, 1]]), 0.75);
         assert_eq!(bound::<[u8; 2]>(&[]), 0.0);
+    }
+
+    /// The 180° turn alone already caps an invariant classifier at 62.5 % under invert-label; the
+    /// trivial group does not cap it.
+    #[test]
+    fn invert_label_is_capped_by_the_half_turn_alone() {
+        use equiarm_sim::rotest::DuckPose;
+        let c = equiarm_sim::rotest::scene::CENTRE;
+        let duck = |x: f32, y: f32| DuckPose { x: c[0] + x, y: c[1] + y, z: 0.0, yaw: 0.0 };
+        let metas: Vec<PairMeta> = [(0.1, 0.05), (-0.07, 0.12), (0.02, -0.11)]
+            .iter()
+            .map(|&(x, y)| PairMeta {
+                idx: 3,
+                label: 3,
+                before: [duck(x, y), duck(-y, x), duck(0.0, 0.0)],
+                after: [duck(x, y), duck(-y, x), duck(0.0, 0.0)],
+                light_color: [1.0; 3],
+            })
+            .collect();
+        let inv = Corruptions::parse("condition_reverse").unwrap();
+        for order in [2, 4, 8] {
+            assert_eq!(subgroup_bound(&metas, &inv, order), 0.625, "C{order}");
+        }
+        assert_eq!(subgroup_bound(&metas, &inv, 1), 1.0);
+        assert_eq!(subgroup_bound(&metas, &Corruptions::none(), 2), 1.0);
     }
 }

@@ -354,10 +354,16 @@ pub fn run(cmd: RotestCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
         }
         RotestCommand::Bound { data } => {
             let h = Dataset::read_header(&data)?;
-            let b = dataset_bound(&h.pairs, &Corruptions::parse(&h.corrupt)?);
+            let c = Corruptions::parse(&h.corrupt)?;
+            let b = dataset_bound(&h.pairs, &c);
             println!("setting {}: {} pairs", h.corrupt, b.pairs);
             println!("bound (rotation uniform over the 8 angles, as generated): {:.4}", b.uniform_rotation);
             println!("bound (the rotations this dataset drew):                 {:.4}", b.drawn);
+            let sub = [1, 2, 4].map(|o| crate::bound::subgroup_bound(&h.pairs, &c, o));
+            println!(
+                "bound of a classifier invariant only to C1 / C2 (180°) / C4 (90°): {:.4} / {:.4} / {:.4}",
+                sub[0], sub[1], sub[2]
+            );
         }
         RotestCommand::Train { data, model, train_pairs, img_trans, seed, opts, out } => {
             let cfg = opts.config(model, train_pairs, img_trans, seed)?;

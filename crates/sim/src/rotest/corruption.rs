@@ -28,11 +28,16 @@ pub enum PairCorruption {
     InvertLabel,
     /// The side camera: eye (1.05, 0, 0.6) looking at the workspace centre (45° elevation), FOV 40°.
     Side,
+    /// Not a corruption: the ducks are placed uniformly in the disc inscribed in the workspace and
+    /// their yaws drawn over the whole circle (the paper: the square, yaws in [0, π)), so that every
+    /// rotation of a scene by k·45° about the centre is exactly as likely as the scene itself, as
+    /// the invariant classifier's accuracy bound assumes (docs/rotest.md, "The bound").
+    FullCircle,
 }
 
 impl PairCorruption {
     /// Every flag, in the order names are written.
-    pub const ALL: [PairCorruption; 10] = [
+    pub const ALL: [PairCorruption; 11] = [
         PairCorruption::Side,
         PairCorruption::Grid,
         PairCorruption::Occlusion,
@@ -43,6 +48,7 @@ impl PairCorruption {
         PairCorruption::Squeeze,
         PairCorruption::Reflect,
         PairCorruption::InvertLabel,
+        PairCorruption::FullCircle,
     ];
 
     /// The flag's name: the paper's code's name (`condition_reverse` for invert-label).
@@ -58,6 +64,7 @@ impl PairCorruption {
             PairCorruption::Reflect => "reflect",
             PairCorruption::InvertLabel => "condition_reverse",
             PairCorruption::Side => "side",
+            PairCorruption::FullCircle => "full_circle",
         }
     }
 

@@ -182,7 +182,7 @@ pub fn generate_pair(assets: &Assets, cfg: &PairConfig, seed: u64) -> Result<Pai
     cfg.validate()?;
     let c = &cfg.corruptions;
     let mut rng = Rng::new(seed);
-    let placement = sample_placement(&mut rng);
+    let placement = sample_placement(&mut rng, c.has(PairCorruption::FullCircle));
     let idx = (rng.next_u64() % 8) as u8;
     // Drawn last, so that a seed gives the same scene and rotation under every setting.
     let light_color =

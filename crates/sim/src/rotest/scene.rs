@@ -67,8 +67,11 @@ pub struct RotScene {
 }
 
 /// Samples three positions uniformly in the workspace, pairwise more than [`MIN_DISTANCE`] apart
-/// (rejection sampling, redrawing all three when a draw fails), and three yaws in [0, π).
-pub fn sample_placement(rng: &mut Rng) -> [([f32; 2], f32); 3] {
+/// (rejection sampling, redrawing all three when a draw fails), and three yaws in [0, π); with
+/// `full_circle`, positions uniformly in the disc inscribed in the workspace (radius
+/// [`HALF_SIDE`]) and yaws in [0, 2π), a distribution that every rotation about [`CENTRE`] maps
+/// onto itself.
+pub fn sample_placement(rng: &mut Rng, full_circle: bool) -> [([f32; 2], f32); 3] {
     loop {
         let mut p: Vec<[f32; 2]> = Vec::with_capacity(3);
         for _ in 0..100 {
@@ -76,6 +79,9 @@ pub fn sample_placement(rng: &mut Rng) -> [([f32; 2], f32); 3] {
                 rng.uniform(CENTRE[0] - HALF_SIDE, CENTRE[0] + HALF_SIDE),
                 rng.uniform(CENTRE[1] - HALF_SIDE, CENTRE[1] + HALF_SIDE),
             ];
+            if full_circle && (q[0] - CENTRE[0]).hypot(q[1] - CENTRE[1]) > HALF_SIDE {
+                continue;
+            }
             if p.iter().all(|o| ((o[0] - q[0]).powi(2) + (o[1] - q[1]).powi(2)).sqrt() > MIN_DISTANCE) {
                 p.push(q);
                 if p.len() == 3 {
@@ -84,7 +90,8 @@ pub fn sample_placement(rng: &mut Rng) -> [([f32; 2], f32); 3] {
             }
         }
         if p.len() == 3 {
-            let yaws = [0; 3].map(|_| rng.uniform(0.0, std::f32::consts::PI));
+            let turn = if full_circle { std::f32::consts::TAU } else { std::f32::consts::PI };
+            let yaws = [0; 3].map(|_| rng.uniform(0.0, turn));
             return [(p[0], yaws[0]), (p[1], yaws[1]), (p[2], yaws[2])];
         }
     }
@@ -205,4 +212,41 @@ pub fn camera(size: usize, side: bool, squeeze: bool) -> Result<Camera> {
         cam.fx = cam.fy / 2.0;
     }
     Ok(cam)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Counts per 45° sector of `angles` (radians), for a check that a distribution is C8-symmetric.
+    fn sectors(angles: impl Iterator<Item = f32>) -> [usize; 8] {
+        let mut n = [0; 8];
+        for a in angles {
+            n[((a.rem_euclid(std::f32::consts::TAU) / std::f32::consts::FRAC_PI_4) as usize).min(7)] += 1;
+        }
+        n
+    }
+
+    /// Issue 58: the invariant classifier's bound holds only where every rotation of a scene is as
+    /// likely as the scene; the paper's placement (yaws in [0, π)) is not, `full_circle`'s is.
+    #[test]
+    fn a_full_circle_placement_is_spread_evenly_over_every_direction() {
+        let mut rng = Rng::new(7);
+        let draws: Vec<_> = (0..3000).flat_map(|_| sample_placement(&mut rng, true)).collect();
+        for (p, yaw) in &draws {
+            assert!((p[0] - CENTRE[0]).hypot(p[1] - CENTRE[1]) <= HALF_SIDE, "{p:?} outside the disc");
+            assert!((0.0..std::f32::consts::TAU).contains(yaw), "{yaw}");
+        }
+        let expect = draws.len() as f64 / 8.0;
+        let bearing = sectors(draws.iter().map(|(p, _)| (p[1] - CENTRE[1]).atan2(p[0] - CENTRE[0])));
+        let yaw = sectors(draws.iter().map(|(_, y)| *y));
+        for n in bearing.iter().chain(&yaw) {
+            // 9,000 draws: a sector's count has a standard deviation of about 31
+            assert!((*n as f64 - expect).abs() < 0.1 * expect, "sectors {bearing:?} / {yaw:?}, expected {expect}");
+        }
+        let mut rng = Rng::new(7);
+        let paper: Vec<_> = (0..300).flat_map(|_| sample_placement(&mut rng, false)).collect();
+        assert!(paper.iter().all(|(_, y)| *y < std::f32::consts::PI), "the paper's yaws stay in [0, π)");
+        assert!(sectors(paper.iter().map(|(_, y)| *y))[4..].iter().all(|n| *n == 0));
+    }
 }
