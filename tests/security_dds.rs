@@ -576,3 +576,37 @@ async fn a_node_refuses_a_tampered_enclave_under_enforce() {
     permissive.security = Security::On { keystore: Some(tmp.path().into()), enforce: false, enclave_override: None };
     RosNode::new("/env0", "sim", &permissive).unwrap();
 }
+
+/// RustDDS 0.15.1 makes a reader under its security plugins' lock and then takes the participant's,
+/// and makes a topic the other way round: a secured node whose spinner made its readers on a tokio
+/// worker while the node made its own topics could hang at start-up (docs/security.md, "Two locks in
+/// opposite orders"). A secured node made and given 30 topics at once, 200 times in a row, starts
+/// every time.
+#[test]
+fn a_secured_node_makes_its_endpoints_while_its_spinner_starts() {
+    const NODES: usize = 200;
+    let tmp = tempfile::tempdir().unwrap();
+    // an enclave outside the suite's roles: every topic granted
+    keystore(tmp.path(), 57, &["/equiarm/test/starts"]);
+    let opts = secured(57, tmp.path(), "/equiarm/test/starts");
+    let (tx, rx) = std::sync::mpsc::channel();
+    // A thread and a runtime of their own, so that a node hung in RustDDS shows as a timeout here,
+    // not as a hung test (a runtime whose worker is stuck never finishes dropping).
+    std::thread::spawn(move || {
+        let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
+        let _in_runtime = runtime.enter();
+        for i in 0..NODES {
+            let mut node = RosNode::new("/test", "starts", &opts).unwrap();
+            let _pubs: Vec<Publisher<GripperCommand>> =
+                (0..30).map(|t| node.publisher(&format!("t{t}"), qos::command()).unwrap()).collect();
+            if tx.send(i).is_err() {
+                return;
+            }
+        }
+    });
+    for i in 0..NODES {
+        if let Err(e) = rx.recv_timeout(Duration::from_secs(30)) {
+            panic!("secured node {} of {NODES} did not start within 30 s ({e})", i + 1);
+        }
+    }
+}

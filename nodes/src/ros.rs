@@ -137,11 +137,20 @@ impl RosNode {
         let mut node = context.new_node(node_name, options).map_err(|e| anyhow!("creating node '{name}': {e:?}"))?;
         let spinner = node.spinner().map_err(|e| anyhow!("creating spinner of node '{name}': {e:?}"))?;
         let task_name = fqn.clone();
-        tokio::spawn(async move {
+        let mut spin = Box::pin(async move {
             if let Err(e) = spinner.spin().await {
                 warn!("{task_name}: spinner stopped: {e:?}");
             }
         });
+        // The spinner makes its readers (ROS discovery info, /clock) in its first poll: poll it
+        // here once, so that they exist before this node makes its own topics. RustDDS 0.15.1 takes
+        // the participant's lock and its security plugins' lock in opposite orders when one thread
+        // makes a topic while another makes a reader, and a secured node then hangs at start-up
+        // (docs/security.md).
+        let mut cx = std::task::Context::from_waker(std::task::Waker::noop());
+        if spin.as_mut().poll(&mut cx).is_pending() {
+            tokio::spawn(spin);
+        }
         let security = enclave.as_ref().map_or("off".to_string(), |e| format!("enclave {e}"));
         info!(
             "{fqn}: joined ROS 2 domain {} (localhost only: {}; security: {security})",
