@@ -44,15 +44,55 @@ pub struct Variant {
     pub model: ModelKind,
     /// The augmentation.
     pub augmentation: Augmentation,
+    /// Hidden size of the networks as a fraction of the grid's (`hidden`): 1, or ½ for the paper's SEN,
+    /// whose width is half Equi SAC's so that their parameter counts match (docs/paper.md §1.7, §1.9).
+    pub hidden_divisor: usize,
 }
 
 /// Every variant a grid may name (docs/paper.md §1.8–1.11).
-pub const VARIANTS: [Variant; 5] = [
-    Variant { name: "equi", label: "Equi SAC + RAD", model: ModelKind::Equi, augmentation: Augmentation::Rad },
-    Variant { name: "cnn", label: "CNN SAC + RAD", model: ModelKind::Cnn, augmentation: Augmentation::Rad },
-    Variant { name: "cnn_drq", label: "CNN SAC + DrQ", model: ModelKind::Cnn, augmentation: Augmentation::PAPER_DRQ },
-    Variant { name: "sen", label: "SEN + RAD", model: ModelKind::Sen, augmentation: Augmentation::Rad },
-    Variant { name: "ferm", label: "FERM", model: ModelKind::Ferm, augmentation: Augmentation::FERM },
+pub const VARIANTS: [Variant; 6] = [
+    Variant {
+        name: "equi",
+        label: "Equi SAC + RAD",
+        model: ModelKind::Equi,
+        augmentation: Augmentation::Rad,
+        hidden_divisor: 1,
+    },
+    Variant {
+        name: "cnn",
+        label: "CNN SAC + RAD",
+        model: ModelKind::Cnn,
+        augmentation: Augmentation::Rad,
+        hidden_divisor: 1,
+    },
+    Variant {
+        name: "cnn_drq",
+        label: "CNN SAC + DrQ",
+        model: ModelKind::Cnn,
+        augmentation: Augmentation::PAPER_DRQ,
+        hidden_divisor: 1,
+    },
+    Variant {
+        name: "sen",
+        label: "SEN + RAD (Equi's width)",
+        model: ModelKind::Sen,
+        augmentation: Augmentation::Rad,
+        hidden_divisor: 1,
+    },
+    Variant {
+        name: "ferm",
+        label: "FERM",
+        model: ModelKind::Ferm,
+        augmentation: Augmentation::FERM,
+        hidden_divisor: 1,
+    },
+    Variant {
+        name: "sen_half",
+        label: "SEN + RAD",
+        model: ModelKind::Sen,
+        augmentation: Augmentation::Rad,
+        hidden_divisor: 2,
+    },
 ];
 
 impl Variant {
@@ -307,6 +347,7 @@ impl Grid {
             Variant::by_name(&cell.variant).ok_or_else(|| bad(format!("unknown variant `{}`", cell.variant)))?;
         cfg.task = cell.task;
         cfg.agent.model = variant.model;
+        cfg.agent.hidden /= variant.hidden_divisor;
         cfg.augmentation = variant.augmentation;
         cfg.view = cell.view;
         cfg.corruption = cell.corruption;
@@ -347,6 +388,22 @@ mod tests {
     }
 
     const BASE: &str = "description = \"t\"\ntasks = [\"block_pulling\", \"block_in_bowl\"]\nvariants = [\"equi\", \"cnn_drq\"]\nseeds = [0, 1]\n";
+
+    /// Issue 58: the paper's SEN is half Equi SAC's width (hidden 32 against 64), which matches their
+    /// parameter counts; `sen_half` keeps that ratio at any grid's width, `sen` is Equi's width.
+    #[test]
+    fn sen_half_is_half_the_grids_width() {
+        let g = parse("description = \"t\"\ntasks = [\"block_pulling\"]\nvariants = [\"equi\", \"sen\", \"sen_half\"]\nseeds = [0]\n")
+            .unwrap();
+        let hidden: Vec<(ModelKind, usize)> =
+            g.cells().iter().map(|c| g.config(c).map(|x| (x.agent.model, x.agent.hidden)).unwrap()).collect();
+        assert_eq!(hidden, [(ModelKind::Equi, 16), (ModelKind::Sen, 16), (ModelKind::Sen, 8)]);
+        // a width whose half is not a multiple of 8 is refused, naming the run and the field
+        let e = parse("description = \"t\"\ntasks = [\"block_pulling\"]\nvariants = [\"sen_half\"]\nseeds = [0]\n[config]\nagent = { hidden = 8 }\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("sen_half") && e.contains("agent.hidden") && e.contains("multiple of 8"), "{e}");
+    }
 
     #[test]
     fn cells_and_configs_follow_the_file() {
