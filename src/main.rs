@@ -100,9 +100,31 @@ enum Command {
     Security(cmd::security::SecurityCommand),
 }
 
+/// Whether the command's output is meant to be read, and maybe cut short, by another program
+/// (`equiarm bag info … | head`): such a command ends quietly when its reader goes, as Unix tools
+/// do, instead of panicking on the failed write. Not the nodes and training runs: their sockets
+/// must not end the process.
+fn writes_for_a_pipe(command: &Command) -> bool {
+    matches!(
+        command,
+        Command::Msg(_)
+            | Command::Topic(_)
+            | Command::Bag(_)
+            | Command::Nn(_)
+            | Command::Rotest(_)
+            | Command::Experiment(_)
+            | Command::Security(_)
+    )
+}
+
 fn main() -> ExitCode {
     equiarm_nodes::ros::init_logging();
-    match dispatch(Cli::parse().command) {
+    let command = Cli::parse().command;
+    if writes_for_a_pipe(&command) {
+        // SAFETY: called before any other thread exists; SIG_DFL is a valid disposition for SIGPIPE.
+        unsafe { libc::signal(libc::SIGPIPE, libc::SIG_DFL) };
+    }
+    match dispatch(command) {
         Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e:#}");

@@ -31,6 +31,21 @@ fn msg_show_prints_the_full_definition_and_rejects_unknown_types() {
     assert_eq!(String::from_utf8(out.stdout).unwrap().lines().count(), equiarm_msgs::ALL_TYPES.len());
 }
 
+/// `equiarm msg list | head -1` and the like: a tool whose reader has gone ends quietly (killed by
+/// SIGPIPE, as Unix tools are), not with a panic on the failed write.
+#[test]
+fn a_tool_whose_reader_is_gone_ends_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    for args in [&["msg", "list"][..], &["msg", "show", "equiarm_msgs/Observation"]] {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let out = equiarm().args(args).stdout(writer).stderr(Stdio::piped()).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert_eq!(out.status.signal(), Some(libc::SIGPIPE), "{args:?}: {:?} {err}", out.status);
+    }
+}
+
 fn echo_then_signal(domain: u16, signal: &str) {
     let mut child = equiarm()
         .args(["topic", "echo", "/cli/gripper_cmd", "--type", GripperCommand::TYPE_NAME])
