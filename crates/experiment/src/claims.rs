@@ -246,7 +246,6 @@ mod tests {
     #[test]
     fn a_side_is_the_finished_seeds_of_its_cell_in_seed_order() {
         use equiarm_sac::config::TrainConfig;
-        use equiarm_train::evaluation::EvalResult;
         let run = |path: &str, seed: u64, r: f64| {
             let mut config = TrainConfig::reduced16(equiarm_types::TaskKind::BlockPulling);
             config.seed = seed;
@@ -254,19 +253,7 @@ mod tests {
                 run: PathBuf::from(path),
                 config,
                 evals: Vec::new(),
-                result: crate::runner::RunResult {
-                    updates: 10,
-                    env_steps: 50,
-                    train_seconds: 1.0,
-                    last_eval: None,
-                    heldout: EvalResult {
-                        episodes: 100,
-                        success_rate: r / 2.0,
-                        discounted_return: r,
-                        ..EvalResult::default()
-                    },
-                    heldout_seconds: 1.0,
-                },
+                result: crate::runner::test_result(r / 2.0, r),
             }
         };
         let runs = [

@@ -547,19 +547,7 @@ mod tests {
                 seed,
             },
             evals: Vec::new(),
-            result: success.map(|s| RunResult {
-                updates: 10,
-                env_steps: 50,
-                train_seconds: 1.0,
-                last_eval: None,
-                heldout: EvalResult {
-                    episodes: 100,
-                    success_rate: s,
-                    discounted_return: s / 2.0,
-                    ..EvalResult::default()
-                },
-                heldout_seconds: 1.0,
-            }),
+            result: success.map(|s| crate::runner::test_result(s, s / 2.0)),
             total_updates: 10,
         };
         let views = [

@@ -52,6 +52,19 @@ pub struct RunResult {
     pub heldout_seconds: f64,
 }
 
+/// A finished run's result with the given held-out success rate and discounted return (tests).
+#[cfg(test)]
+pub(crate) fn test_result(success_rate: f64, discounted_return: f64) -> RunResult {
+    RunResult {
+        updates: 10,
+        env_steps: 50,
+        train_seconds: 1.0,
+        last_eval: None,
+        heldout: EvalResult { episodes: 100, success_rate, discounted_return, ..EvalResult::default() },
+        heldout_seconds: 1.0,
+    }
+}
+
 /// The result file of a run directory.
 pub const RESULT_FILE: &str = "result.json";
 /// The log of a run's child processes (appended to by each part).
