@@ -27,7 +27,7 @@ use serde::Deserialize;
 
 use crate::error::{ExperimentError, Result};
 use crate::grid::Variant;
-use crate::report::{ARCHIVE_FILE, Archived, MIN_SEEDS_FOR_SE};
+use crate::report::{self, ARCHIVE_FILE, Archived, MIN_SEEDS_FOR_SE};
 
 /// Where the claims table starts and ends in the page it is written into.
 pub const BEGIN: &str = "<!-- claims table: begin (written by `equiarm experiment claims`) -->";
@@ -62,9 +62,9 @@ pub struct Claim {
     /// What the data must show.
     pub test: Test,
     /// `GRID:task/variant/view/corruption`: the runs of that cell in the grid's archive.
-    pub a: String,
+    pub a: CellRef,
     /// As `a`.
-    pub b: String,
+    pub b: CellRef,
     /// The name `a` goes by in the table (default: its variant's label).
     #[serde(default)]
     pub a_label: Option<String>,
@@ -82,13 +82,34 @@ pub struct Side {
     pub success: Vec<f64>,
 }
 
-/// Splits `GRID:cell` and checks the cell has the four parts of a run path without its seed.
-fn parse_ref(r: &str) -> std::result::Result<(&str, &str), String> {
-    let (grid, cell) = r.split_once(':').ok_or_else(|| format!("`{r}`: expected GRID:task/variant/view/corruption"))?;
-    if grid.is_empty() || cell.split('/').count() != 4 || cell.split('/').any(str::is_empty) {
-        return Err(format!("`{r}`: expected GRID:task/variant/view/corruption"));
+/// A claim's cell reference, `GRID:task/variant/view/corruption`: a grid and a run path without its
+/// seed (read once, from the claims file).
+#[derive(Clone, Debug, PartialEq, Eq, Deserialize)]
+#[serde(try_from = "String")]
+pub struct CellRef {
+    /// The grid whose archive holds the runs.
+    pub grid: String,
+    /// `task/variant/view/corruption`.
+    pub cell: String,
+}
+
+impl CellRef {
+    /// The cell's model variant (its second part).
+    pub fn variant(&self) -> &str {
+        self.cell.split('/').nth(1).unwrap_or_default()
     }
-    Ok((grid, cell))
+}
+
+impl TryFrom<String> for CellRef {
+    type Error = String;
+    fn try_from(r: String) -> std::result::Result<Self, String> {
+        let bad = || format!("`{r}`: expected GRID:task/variant/view/corruption");
+        let (grid, cell) = r.split_once(':').ok_or_else(bad)?;
+        if grid.is_empty() || cell.split('/').count() != 4 || cell.split('/').any(str::is_empty) {
+            return Err(bad());
+        }
+        Ok(CellRef { grid: grid.to_string(), cell: cell.to_string() })
+    }
 }
 
 /// The finished runs of `cell` in `runs` (one grid's archive).
@@ -103,14 +124,12 @@ pub fn side(runs: &[Archived], cell: &str) -> Side {
     out
 }
 
-/// A mean over seeds as the table prints it, with the seed count (no standard error below three).
+/// A mean over seeds as the table prints it (as the grid pages do), with the seed count.
 fn stat(v: &[f64]) -> String {
-    let (m, se) = mean_se(v);
-    let seeds = if v.len() == 1 { "1 seed".to_string() } else { format!("{} seeds", v.len()) };
     match v.len() {
         0 => "no finished run".to_string(),
-        n if n < MIN_SEEDS_FOR_SE => format!("{m:.2} ({seeds})"),
-        _ => format!("{m:.2} ± {se:.2} ({seeds})"),
+        1 => format!("{} (1 seed)", report::stat(v)),
+        n => format!("{} ({n} seeds)", report::stat(v)),
     }
 }
 
@@ -148,20 +167,10 @@ pub fn verdict(test: Test, a: &[f64], b: &[f64]) -> String {
 
 /// The claims of a claims file, each cell reference checked for its form.
 pub fn read(claims_file: &Path) -> Result<Vec<Claim>> {
-    let bad = |message: String| ExperimentError::Claims { path: claims_file.to_path_buf(), message };
     let text = std::fs::read_to_string(claims_file).map_err(at(claims_file))?;
-    let file: ClaimsFile = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
-    for (i, c) in file.claim.iter().enumerate() {
-        for r in [&c.a, &c.b] {
-            parse_ref(r).map_err(|e| bad(format!("claim {} ({}): {e}", i + 1, c.claim)))?;
-        }
-    }
+    let file: ClaimsFile = toml::from_str(&text)
+        .map_err(|e| ExperimentError::Claims { path: claims_file.to_path_buf(), message: e.to_string() })?;
     Ok(file.claim)
-}
-
-/// A claim's cell reference `GRID:task/variant/view/corruption` as (grid, cell).
-pub fn cell_ref(r: &str) -> Option<(&str, &str)> {
-    parse_ref(r).ok()
 }
 
 /// The claims of `claims_file` checked on the archives below `archive_dir`, as a Markdown table.
@@ -174,17 +183,13 @@ pub fn table(claims_file: &Path, archive_dir: &Path) -> Result<String> {
     for c in &claims {
         let mut cells = Vec::new();
         for (r, label) in [(&c.a, &c.a_label), (&c.b, &c.b_label)] {
-            let (grid, cell) = parse_ref(r).map_err(|message| ExperimentError::Claims {
-                path: claims_file.to_path_buf(),
-                message: format!("{}: {message}", c.claim),
-            })?;
-            if !archives.contains_key(grid) {
-                let f = archive_dir.join(grid).join(ARCHIVE_FILE);
+            if !archives.contains_key(&r.grid) {
+                let f = archive_dir.join(&r.grid).join(ARCHIVE_FILE);
                 let runs: Vec<Archived> = if f.is_file() { equiarm_sac::learner::read_json(&f)? } else { Vec::new() };
-                archives.insert(grid.to_string(), runs);
+                archives.insert(r.grid.clone(), runs);
             }
-            let s = side(&archives[grid], cell);
-            let variant = cell.split('/').nth(1).unwrap_or_default();
+            let s = side(&archives[&r.grid], &r.cell);
+            let variant = r.variant();
             let label = label.clone().unwrap_or_else(|| Variant::by_name(variant).map_or(variant, |v| v.label).into());
             cells.push((label, s));
         }
@@ -270,9 +275,11 @@ mod tests {
 
     #[test]
     fn cell_references_name_a_grid_and_four_path_parts() {
-        assert_eq!(parse_ref("tasks:block_pulling/equi/side/none"), Ok(("tasks", "block_pulling/equi/side/none")));
+        let r = CellRef::try_from("tasks:block_pulling/equi/side/none".to_string()).unwrap();
+        assert_eq!((r.grid.as_str(), r.cell.as_str(), r.variant()), ("tasks", "block_pulling/equi/side/none", "equi"));
         for bad in ["block_pulling/equi/side/none", "tasks:block_pulling/equi/side", ":a/b/c/d", "t:a//c/d"] {
-            assert!(parse_ref(bad).unwrap_err().contains("expected GRID:task/variant/view/corruption"), "{bad}");
+            let e = CellRef::try_from(bad.to_string()).unwrap_err();
+            assert!(e.contains("expected GRID:task/variant/view/corruption"), "{bad}");
         }
     }
 
@@ -312,7 +319,7 @@ mod tests {
         )
         .unwrap();
         let e = table(&claims, &dir).unwrap_err().to_string();
-        assert!(e.contains("claims.toml") && e.contains("claim 1 (X)") && e.contains("`g:x`"), "{e}");
+        assert!(e.contains("claims.toml") && e.contains("line 5") && e.contains("`g:x`: expected GRID:"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

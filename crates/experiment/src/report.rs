@@ -426,7 +426,7 @@ pub const MIN_SEEDS_FOR_SE: usize = 3;
 
 /// A mean over seeds as the pages print it: `m ± se` from [`MIN_SEEDS_FOR_SE`] seeds on, the mean
 /// alone below that (the tables give the seed count beside it), `–` for none.
-fn stat(v: &[f64]) -> String {
+pub(crate) fn stat(v: &[f64]) -> String {
     let (m, se) = mean_se(v);
     match v.len() {
         0 => "–".to_string(),

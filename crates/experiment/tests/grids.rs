@@ -44,12 +44,12 @@ fn every_claim_names_cells_of_its_grids() {
     assert!(claims.len() >= 10, "{} claims", claims.len());
     for c in &claims {
         for r in [&c.a, &c.b] {
-            let (grid, cell) = equiarm_experiment::claims::cell_ref(r).unwrap();
+            let (grid, cell) = (&r.grid, &r.cell);
             let g = Grid::read(&root.join("experiments").join(format!("{grid}.toml")))
                 .unwrap_or_else(|e| panic!("claim {}: {e}", c.claim));
             let cells: Vec<PathBuf> = g.cells().iter().map(|x| x.rel_dir()).collect();
             assert!(
-                cells.iter().any(|d| d.parent() == Some(std::path::Path::new(cell))),
+                cells.iter().any(|d| d.parent() == Some(std::path::Path::new(cell.as_str()))),
                 "claim {}: {cell} is not a cell of grid {grid}",
                 c.claim
             );
