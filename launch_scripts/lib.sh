@@ -73,9 +73,12 @@ eqa_bin() {
 # eqa_secure RUN_DIR NUM_ENVS: DDS Security for a run of the suite (docs/security.md): the keystore
 # ROS_SECURITY_KEYSTORE names, else RUN_DIR/keystore (made on first use, reused by a resumed run), an
 # enclave for each node (the trainer, the recorder, /env0 … /envN-1 and /eval's sim and policy), and
-# the ROS 2 security variables (Enforce) that every node started afterwards reads.
+# the ROS 2 security variables (Enforce) that every node started afterwards reads. With
+# EQUIARM_SECURITY_KEY_PASSWORD_FILE set, new enclaves' keys are encrypted with that file's password
+# (and the nodes decrypt them with it).
 eqa_secure() {
-  local run_dir=$1 n=$2 ks e
+  local run_dir=$1 n=$2 ks e pw=()
+  [ -n "${EQUIARM_SECURITY_KEY_PASSWORD_FILE:-}" ] && pw=(--key-password-file "$EQUIARM_SECURITY_KEY_PASSWORD_FILE")
   ks=${ROS_SECURITY_KEYSTORE:-$run_dir/keystore}
   if [ ! -e "$ks/enclaves/governance.p7s" ]; then
     "$EQUIARM_BIN" security create-keystore "$ks" >/dev/null || return 1
@@ -83,7 +86,7 @@ eqa_secure() {
   local enclaves=(/equiarm/trainer /equiarm/equiarm_recorder /equiarm/eval/sim /equiarm/eval/policy)
   for i in $(seq 0 $((n - 1))); do enclaves+=("/equiarm/env$i/sim" "/equiarm/env$i/policy"); done
   for e in "${enclaves[@]}"; do
-    "$EQUIARM_BIN" security create-enclave "$ks" "$e" >/dev/null || return 1
+    "$EQUIARM_BIN" security create-enclave "$ks" "$e" "${pw[@]}" >/dev/null || return 1
   done
   ROS_SECURITY_KEYSTORE=$(cd "$ks" && pwd)
   export ROS_SECURITY_KEYSTORE ROS_SECURITY_ENABLE=true ROS_SECURITY_STRATEGY=Enforce

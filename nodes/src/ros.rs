@@ -25,7 +25,7 @@ use equiarm_msgs::RosMessage;
 
 use crate::endpoints::{BadInputLog, Padded};
 pub use crate::endpoints::{Publisher, Subscriber};
-use crate::secure::Security;
+use crate::secure::{Joined, Security};
 pub use crate::signals::shutdown_signal;
 use log::{debug, info, warn};
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
@@ -126,9 +126,14 @@ impl RosNode {
             builder = builder.with_only_networks([Ipv4Addr::LOCALHOST]);
         }
         let fqn = if namespace == "/" { format!("/{name}") } else { format!("{namespace}/{name}") };
-        let (builder, enclave) = opts.security.apply(builder, &fqn, opts.domain_id)?;
+        let (builder, joined) = opts.security.apply(builder, &fqn, opts.domain_id)?;
         let participant =
             builder.build().map_err(|e| anyhow!("creating DDS participant on domain {}: {e:?}", opts.domain_id))?;
+        // the plugins have read the key: a decrypted one leaves memory here
+        let enclave = joined.map(|Joined { name, key }| {
+            drop(key);
+            name
+        });
         let context = Context::from_domain_participant(participant)
             .map_err(|e| anyhow!("creating ROS 2 context on domain {}: {e:?}", opts.domain_id))?;
         let node_name = NodeName::new(namespace, name)

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use anyhow::{Context as _, bail};
 use clap::Subcommand;
 use equiarm_nodes::ros::RosOptions;
-use equiarm_security::{EnclaveName, Grant, Keystore, Role};
+use equiarm_security::{EnclaveName, Grant, KeyPassword, Keystore, Role};
 
 /// `equiarm security` subcommands.
 #[derive(Subcommand)]
@@ -36,6 +36,10 @@ pub enum SecurityCommand {
         /// Every topic (what `ros2 security create_enclave` grants), for a node that is not the suite's.
         #[arg(long)]
         all_topics: bool,
+        /// Encrypt a new key with the password on this file's first line (nodes then need
+        /// EQUIARM_SECURITY_KEY_PASSWORD_FILE naming a file with it; an existing key is kept as it is).
+        #[arg(long, value_name = "FILE")]
+        key_password_file: Option<PathBuf>,
     },
     /// Lists a keystore's enclaves.
     ListEnclaves {
@@ -52,7 +56,7 @@ pub fn run(c: SecurityCommand) -> anyhow::Result<ExitCode> {
             Keystore::create(&dir, domain)?;
             println!("created keystore {} (domain {domain})", dir.display());
         }
-        SecurityCommand::CreateEnclave { dir, name, domain, all_topics } => {
+        SecurityCommand::CreateEnclave { dir, name, domain, all_topics, key_password_file } => {
             let domain = domain_or_env(domain)?;
             let ks = Keystore::open(&dir)?;
             let name = EnclaveName::parse(&name)?;
@@ -65,7 +69,10 @@ pub fn run(c: SecurityCommand) -> anyhow::Result<ExitCode> {
                      /equiarm/equiarm_player); --all-topics grants it every topic"
                 ),
             };
-            let at = ks.create_enclave(&name, domain, &grant).with_context(|| format!("creating enclave '{name}'"))?;
+            let password = key_password_file.as_deref().map(KeyPassword::read).transpose()?;
+            let at = ks
+                .create_enclave(&name, domain, &grant, password.as_ref())
+                .with_context(|| format!("creating enclave '{name}'"))?;
             println!("created enclave {name} in {} (domain {domain})", at.display());
         }
         SecurityCommand::ListEnclaves { dir } => {

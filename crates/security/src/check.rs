@@ -12,7 +12,7 @@ use openssl::stack::Stack;
 use openssl::x509::X509;
 use openssl::x509::store::X509StoreBuilder;
 
-use crate::keystore::read_cert;
+use crate::keystore::{KEY_PASSWORD_VAR, KeyPassword, read_cert};
 use crate::xml::{Element, domains_hold};
 use crate::{Error, io_error};
 
@@ -31,6 +31,10 @@ pub struct Enclave {
     pub governance: String,
     /// The signed permissions' XML.
     pub permissions: String,
+    /// `key.pem` decrypted (unencrypted PKCS#8 PEM), when it is encrypted with a password: the DDS
+    /// Security plugins read only unencrypted keys, so a node hands them this one from memory
+    /// ([`KeyInMemory`](crate::KeyInMemory)).
+    pub decrypted_key: Option<Vec<u8>>,
 }
 
 impl Enclave {
@@ -43,8 +47,9 @@ impl Enclave {
 /// Checks the enclave in `dir` for joining `domain`: every file there and readable; the identity
 /// certificate issued by the identity CA and valid now; the key the certificate's; the governance and
 /// permissions signed by the permissions CA, parsing, with a rule for `domain`, and a grant for the
-/// certificate's subject that is valid now and allows something on `domain`.
-pub fn check_enclave(dir: &Path, domain: u16) -> Result<Enclave, Error> {
+/// certificate's subject that is valid now and allows something on `domain`. An encrypted `key.pem`
+/// needs `password`.
+pub fn check_enclave(dir: &Path, domain: u16, password: Option<&KeyPassword>) -> Result<Enclave, Error> {
     for f in ENCLAVE_FILES {
         let p = dir.join(f);
         if !p.is_file() {
@@ -60,7 +65,7 @@ pub fn check_enclave(dir: &Path, domain: u16) -> Result<Enclave, Error> {
     }
     valid_now(&cert).map_err(|why| bad("cert.pem", why))?;
     valid_now(&identity_ca).map_err(|why| bad("identity_ca.cert.pem", why))?;
-    let key = read_key(&dir.join("key.pem"))?;
+    let (key, decrypted_key) = read_key(&dir.join("key.pem"), password)?;
     let cert_key = cert.public_key().map_err(|e| bad("cert.pem", format!("no public key: {e}")))?;
     if !key.public_eq(&cert_key) {
         return Err(bad("key.pem", "not the key of cert.pem".into()));
@@ -80,7 +85,7 @@ pub fn check_enclave(dir: &Path, domain: u16) -> Result<Enclave, Error> {
         .join(",");
     check_governance(&governance, domain).map_err(|why| bad("governance.p7s", why))?;
     check_permissions(&permissions, &subject, domain).map_err(|why| bad("permissions.p7s", why))?;
-    Ok(Enclave { dir: dir.to_path_buf(), subject, governance, permissions })
+    Ok(Enclave { dir: dir.to_path_buf(), subject, governance, permissions, decrypted_key })
 }
 
 fn check_governance(xml: &str, domain: u16) -> Result<(), String> {
@@ -136,17 +141,23 @@ fn valid_now(cert: &X509) -> Result<(), String> {
     Ok(())
 }
 
-fn read_key(path: &Path) -> Result<PKey<Private>, Error> {
+/// The key in `path`, and its unencrypted PEM when the file is encrypted.
+fn read_key(path: &Path, password: Option<&KeyPassword>) -> Result<(PKey<Private>, Option<Vec<u8>>), Error> {
+    let bad = |why: String| Error::File { path: path.to_path_buf(), why };
     let pem = fs::read(path).map_err(io_error(path))?;
-    let text = String::from_utf8_lossy(&pem);
-    if text.contains("ENCRYPTED") {
-        return Err(Error::File {
-            path: path.to_path_buf(),
-            why: "encrypted with a password; the DDS Security plugins read only unencrypted keys (as `ros2 security` writes them)".into(),
-        });
+    if !String::from_utf8_lossy(&pem).contains("ENCRYPTED") {
+        return Ok((PKey::private_key_from_pem(&pem).map_err(|e| bad(format!("not a PEM private key: {e}")))?, None));
     }
-    PKey::private_key_from_pem(&pem)
-        .map_err(|e| Error::File { path: path.to_path_buf(), why: format!("not a PEM private key: {e}") })
+    let Some(password) = password else {
+        return Err(bad(format!(
+            "encrypted with a password, and none was given (set {KEY_PASSWORD_VAR} to a file that holds it)"
+        )));
+    };
+    let key = PKey::private_key_from_pem_passphrase(&pem, password.secret()).map_err(|_| {
+        bad(format!("the password in {} does not decrypt it (or it is not a PEM private key)", password.file.display()))
+    })?;
+    let plain = key.private_key_to_pem_pkcs8().map_err(|e| bad(format!("re-encoding the decrypted key: {e}")))?;
+    Ok((key, Some(plain)))
 }
 
 /// The content of the S/MIME document `path` after checking its signature against `ca`.

@@ -29,6 +29,7 @@ use openssl::nid::Nid;
 use openssl::pkcs7::{Pkcs7, Pkcs7Flags};
 use openssl::pkey::{PKey, Private};
 use openssl::stack::Stack;
+use openssl::symm::Cipher;
 use openssl::x509::extension::BasicConstraints;
 use openssl::x509::{X509, X509Name};
 
@@ -103,7 +104,15 @@ impl Keystore {
 
     /// Creates the enclave `name` (or completes it: an existing identity is kept, as sros2 does) with
     /// permissions `grant` on `domain`, signed by the permissions CA. Returns its directory.
-    pub fn create_enclave(&self, name: &EnclaveName, domain: u16, grant: &Grant) -> Result<PathBuf, Error> {
+    /// With `password`, a new key is written encrypted with it (PKCS#8, AES-256-CBC, as `openssl
+    /// genpkey -aes-256-cbc` writes it); nodes then need it ([`KEY_PASSWORD_VAR`]).
+    pub fn create_enclave(
+        &self,
+        name: &EnclaveName,
+        domain: u16,
+        grant: &Grant,
+        password: Option<&KeyPassword>,
+    ) -> Result<PathBuf, Error> {
         let dir = self.enclave_dir(name);
         fs::create_dir_all(&dir).map_err(io_error(&dir))?;
         let depth = name.parts().count();
@@ -119,7 +128,13 @@ impl Keystore {
         if !cert_path.is_file() || !key_path.is_file() {
             let ca = (self.read_key("private/identity_ca.key.pem")?, self.read_cert("public/identity_ca.cert.pem")?);
             let (key, cert) = new_key_and_cert(name.as_str(), Some((&ca.0, &ca.1)))?;
-            write_private(&key_path, &pem_key(&key)?)?;
+            let pem = match password {
+                None => pem_key(&key)?,
+                Some(p) => key
+                    .private_key_to_pem_pkcs8_passphrase(Cipher::aes_256_cbc(), p.secret())
+                    .map_err(ssl_error("encrypting a key"))?,
+            };
+            write_private(&key_path, &pem)?;
             write_file(&cert_path, &cert.to_pem().map_err(ssl_error("encoding a certificate"))?)?;
         }
         let cert = read_cert(&cert_path)?;
@@ -174,6 +189,42 @@ impl Keystore {
         let extra = Stack::new().map_err(ssl_error("signing"))?;
         let p7 = Pkcs7::sign(&cert, &key, &extra, data, flags).map_err(ssl_error("signing a document"))?;
         p7.to_smime(data, flags).map_err(ssl_error("writing S/MIME"))
+    }
+}
+
+/// The environment variable that names the file holding the password of the enclaves' encrypted
+/// keys (one password for a run's keystore; ROS 2 itself has no such variable: its keys are
+/// unencrypted).
+pub const KEY_PASSWORD_VAR: &str = "EQUIARM_SECURITY_KEY_PASSWORD_FILE";
+
+/// The password of encrypted keys, and the file it was read from (for errors).
+pub struct KeyPassword {
+    /// The file.
+    pub file: PathBuf,
+    secret: Vec<u8>,
+}
+
+impl KeyPassword {
+    /// The password in `file`: its first line, without the line end (as `openssl -passin file:`
+    /// reads it). An empty password is refused.
+    pub fn read(file: &Path) -> Result<Self, Error> {
+        let text = fs::read(file).map_err(io_error(file))?;
+        let line = text.split(|&b| b == b'\n').next().unwrap_or_default();
+        let secret = line.strip_suffix(b"\r").unwrap_or(line).to_vec();
+        if secret.is_empty() {
+            return Err(Error::File { path: file.to_path_buf(), why: "empty: no password on its first line".into() });
+        }
+        Ok(KeyPassword { file: file.to_path_buf(), secret })
+    }
+
+    pub(crate) fn secret(&self) -> &[u8] {
+        &self.secret
+    }
+}
+
+impl std::fmt::Debug for KeyPassword {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "KeyPassword {{ file: {:?} }}", self.file)
     }
 }
 

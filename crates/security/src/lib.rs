@@ -8,13 +8,15 @@ pub mod check;
 pub mod documents;
 pub mod graph;
 pub mod keystore;
+pub mod memory;
 pub mod xml;
 
 use std::path::{Path, PathBuf};
 
 pub use check::{Enclave, check_enclave};
 pub use graph::{EnclaveName, Grant, Role};
-pub use keystore::Keystore;
+pub use keystore::{KEY_PASSWORD_VAR, KeyPassword, Keystore};
+pub use memory::KeyInMemory;
 
 /// What went wrong, naming the file or the name at fault.
 #[derive(Debug, thiserror::Error)]

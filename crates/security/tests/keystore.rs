@@ -4,7 +4,7 @@
 use std::fs;
 use std::path::Path;
 
-use equiarm_security::{EnclaveName, Error, Keystore, Role, check_enclave};
+use equiarm_security::{EnclaveName, Error, KeyPassword, Keystore, Role, check_enclave};
 use openssl::asn1::Asn1Time;
 use openssl::hash::MessageDigest;
 use openssl::pkey::PKey;
@@ -18,12 +18,12 @@ fn name(n: &str) -> EnclaveName {
 fn keystore_with_sim(root: &Path, domain: u16) -> (Keystore, std::path::PathBuf) {
     let ks = Keystore::create(root, domain).unwrap();
     let e = name("/equiarm/env0/sim");
-    let dir = ks.create_enclave(&e, domain, &Role::of(&e).unwrap().grant()).unwrap();
+    let dir = ks.create_enclave(&e, domain, &Role::of(&e).unwrap().grant(), None).unwrap();
     (ks, dir)
 }
 
 fn refused(dir: &Path, domain: u16, file: &str, words: &str) {
-    let e = check_enclave(dir, domain).unwrap_err().to_string();
+    let e = check_enclave(dir, domain, None).unwrap_err().to_string();
     assert!(e.contains(&dir.join(file).display().to_string()), "error does not name {file}: {e}");
     assert!(e.contains(words), "error for {file} does not say '{words}': {e}");
 }
@@ -48,7 +48,7 @@ fn a_keystore_has_the_ros2_layout_and_its_enclaves_pass_the_checks() {
         let link = fs::read_link(dir.join(f)).unwrap();
         assert!(link.is_relative(), "{f} links to {}", link.display());
     }
-    let enclave = check_enclave(&dir, 7).unwrap();
+    let enclave = check_enclave(&dir, 7, None).unwrap();
     assert_eq!(enclave.subject, "CN=/equiarm/env0/sim");
     assert!(enclave.permissions.contains("<topic>rt/env0/observation</topic>"));
     // every topic's submessages encrypted (the payload inside them; docs/security.md on why not twice)
@@ -61,7 +61,7 @@ fn a_keystore_has_the_ros2_layout_and_its_enclaves_pass_the_checks() {
     assert!(matches!(Keystore::create(tmp.path(), 7), Err(Error::KeystoreExists(_))));
     // Re-creating an enclave keeps its identity.
     let cert = fs::read(dir.join("cert.pem")).unwrap();
-    ks.create_enclave(&name("/equiarm/env0/sim"), 7, &Role::Trainer.grant()).unwrap();
+    ks.create_enclave(&name("/equiarm/env0/sim"), 7, &Role::Trainer.grant(), None).unwrap();
     assert_eq!(fs::read(dir.join("cert.pem")).unwrap(), cert);
 }
 
@@ -127,14 +127,57 @@ fn missing_tampered_foreign_and_wrong_domain_files_are_refused_naming_the_file()
     refused(&dir, 7, "cert.pem", "expired");
     restore("cert.pem", &cert);
 
-    // A key encrypted with a password (the DDS Security plugins cannot read it).
+    // A key encrypted with a password: refused without the password or with a wrong one (naming the
+    // password's file), decrypted with the right one.
     let pkey = PKey::private_key_from_pem(&key).unwrap();
     let enc = pkey.private_key_to_pem_pkcs8_passphrase(openssl::symm::Cipher::aes_256_cbc(), b"secret").unwrap();
     restore("key.pem", &enc);
-    refused(&dir, 7, "key.pem", "encrypted");
+    refused(
+        &dir,
+        7,
+        "key.pem",
+        "encrypted with a password, and none was given (set EQUIARM_SECURITY_KEY_PASSWORD_FILE",
+    );
+    let pw_dir = tempfile::tempdir().unwrap();
+    let pw = |text: &str| {
+        let f = pw_dir.path().join(format!("pw{}", text.len()));
+        fs::write(&f, text).unwrap();
+        KeyPassword::read(&f).unwrap()
+    };
+    let wrong = pw("not the secret\n");
+    let e = check_enclave(&dir, 7, Some(&wrong)).unwrap_err().to_string();
+    assert!(e.contains(&dir.join("key.pem").display().to_string()), "{e}");
+    assert!(e.contains(&format!("the password in {} does not decrypt it", wrong.file.display())), "{e}");
+    let right = pw("secret\r\n");
+    let enclave = check_enclave(&dir, 7, Some(&right)).unwrap();
+    let plain = enclave.decrypted_key.expect("the decrypted key");
+    assert!(PKey::private_key_from_pem(&plain).unwrap().public_eq(&pkey));
     restore("key.pem", &key);
+    // an unencrypted key needs no password and is handed over as it is
+    assert!(check_enclave(&dir, 7, Some(&right)).unwrap().decrypted_key.is_none());
 
-    check_enclave(&dir, 7).unwrap();
+    check_enclave(&dir, 7, None).unwrap();
+}
+
+/// `create-enclave --key-password-file`: the new key is encrypted with the password; an empty
+/// password file is refused, naming it.
+#[test]
+fn an_enclave_made_with_a_password_has_an_encrypted_key() {
+    let tmp = tempfile::tempdir().unwrap();
+    let ks = Keystore::create(&tmp.path().join("ks"), 7).unwrap();
+    let f = tmp.path().join("pw");
+    fs::write(&f, "").unwrap();
+    let e = KeyPassword::read(&f).unwrap_err().to_string();
+    assert!(e.contains(&f.display().to_string()) && e.contains("empty"), "{e}");
+    let e = KeyPassword::read(&tmp.path().join("none")).unwrap_err().to_string();
+    assert!(e.contains("none"), "{e}");
+    fs::write(&f, "hunter2\n").unwrap();
+    let pw = KeyPassword::read(&f).unwrap();
+    let e = name("/equiarm/env0/sim");
+    let dir = ks.create_enclave(&e, 7, &Role::of(&e).unwrap().grant(), Some(&pw)).unwrap();
+    assert!(fs::read_to_string(dir.join("key.pem")).unwrap().contains("BEGIN ENCRYPTED PRIVATE KEY"));
+    refused(&dir, 7, "key.pem", "none was given");
+    assert!(check_enclave(&dir, 7, Some(&pw)).unwrap().decrypted_key.is_some());
 }
 
 #[test]
