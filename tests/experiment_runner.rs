@@ -120,6 +120,23 @@ fn a_killed_grid_resumes_to_the_same_updates_and_reports() {
         assert!(std::fs::metadata(out.join(f)).unwrap().len() > 1000, "{f}");
     }
 
+    // `experiment heldout` evaluates a finished run's weights on the grid's held-out episodes: the
+    // same figures as its result.json at the runs' thread count (one); a directory that is no run
+    // is named with what it lacks.
+    let held = equiarm()
+        .env("RAYON_NUM_THREADS", "1")
+        .args(["experiment", "heldout", "--episodes", "3"])
+        .arg(&equi)
+        .output()
+        .unwrap();
+    assert!(held.status.success(), "{}", String::from_utf8_lossy(&held.stderr));
+    let h: serde_json::Value = serde_json::from_slice(&std::fs::read(equi.join("heldout.json")).unwrap()).unwrap();
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(equi.join("result.json")).unwrap()).unwrap();
+    assert_eq!(h, r["heldout"], "held-out of the final weights, again");
+    let none = equiarm().args(["experiment", "heldout"]).arg(&dir).output().unwrap();
+    let err = String::from_utf8_lossy(&none.stderr);
+    assert!(!none.status.success() && err.contains("config.json") && !err.contains("panicked"), "{err}");
+
     // The report archived both runs: without the run directories they still count as done and
     // the report is drawn again from the archive.
     std::fs::remove_dir_all(&runs).unwrap();

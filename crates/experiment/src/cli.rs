@@ -76,6 +76,20 @@ pub enum ExperimentCommand {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Evaluate a run's final weights on held-out episodes, as the grids do at the end of each run
+    /// (the same episodes for every run of a task): a run of `equiarm train`, in-process or over
+    /// DDS (the trainer node's run directory). Prints the result and writes RUN/heldout.json.
+    #[command(after_help = "Example:\n  equiarm experiment heldout runs/block_pulling-2026-12-08 --episodes 100")]
+    Heldout {
+        /// The run directory (its config.json and checkpoints/).
+        dir: PathBuf,
+        /// Held-out episodes.
+        #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=100_000))]
+        episodes: u64,
+        /// The checkpoint (default: the run's latest).
+        #[arg(long)]
+        checkpoint: Option<PathBuf>,
+    },
     /// Train one run directory (its config.json) to the end, or from its latest checkpoint, then
     /// evaluate it on held-out episodes (what `run` starts for each run).
     #[command(hide = true)]
@@ -218,6 +232,26 @@ pub fn run(cmd: ExperimentCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
             let file = file.unwrap_or_else(|| archive.join("claims.toml"));
             let out = out.unwrap_or_else(|| archive.join("README.md"));
             println!("{}", crate::claims::write(&file, &archive, &out)?.display());
+            Ok(0)
+        }
+        ExperimentCommand::Heldout { dir, episodes, checkpoint } => {
+            let cfg: equiarm_sac::config::TrainConfig = equiarm_sac::learner::read_json(&dir.join("config.json"))
+                .map_err(|e| crate::ExperimentError::Run { dir: dir.clone(), message: format!("config.json: {e}") })?;
+            equiarm_train::config::check(&cfg).map_err(equiarm_train::TrainError::from)?;
+            let checkpoint = match checkpoint {
+                Some(c) => c,
+                None => equiarm_train::rundir::find_checkpoint(&dir)?,
+            };
+            let r = crate::runner::heldout(&cfg, &checkpoint, episodes as usize)?;
+            equiarm_sac::learner::write_json(&dir.join("heldout.json"), &r)?;
+            println!(
+                "{}: held-out success {:.2} (discounted return {:.3}) over {} episodes, checkpoint {}",
+                dir.display(),
+                r.success_rate,
+                r.discounted_return,
+                r.episodes,
+                checkpoint.display()
+            );
             Ok(0)
         }
         ExperimentCommand::RunOne { dir, heldout_episodes, checkpoint_minutes } => {

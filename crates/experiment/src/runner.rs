@@ -171,14 +171,7 @@ pub fn run_one(
         return Ok(None);
     }
     let t0 = Instant::now();
-    let mut learner = Learner::new(cfg.clone()).map_err(equiarm_train::TrainError::from)?;
-    learner.resume(&find_checkpoint(dir)?).map_err(equiarm_train::TrainError::from)?;
-    let env_cfg = equiarm_train::env::env_config(&cfg)?;
-    let mut envs: Vec<equiarm_sim::Env> = (0..cfg.num_envs.max(1))
-        .map(|_| equiarm_sim::Env::new(env_cfg.clone()))
-        .collect::<Result<_, _>>()
-        .map_err(equiarm_train::TrainError::from)?;
-    let heldout = evaluate_on(&mut learner, &mut envs, heldout_episodes, Stream::HeldOut)?;
+    let heldout = heldout(&cfg, &find_checkpoint(dir)?, heldout_episodes)?;
     let state = equiarm_train::inprocess::LoopState::read(&find_checkpoint(dir)?)
         .map_err(|e| ExperimentError::Run { dir: dir.to_path_buf(), message: e.to_string() })?;
     let result = RunResult {
@@ -193,6 +186,20 @@ pub fn run_one(
     write_json(&path, &result)?;
     prune_checkpoints(dir)?;
     Ok(Some(result))
+}
+
+/// The greedy policy of `checkpoint` (a run of `cfg`: in-process, a grid's or the trainer node's)
+/// on `episodes` held-out episodes: seeds that no evaluation during training used, the same for
+/// every run of a task, so that runs made either way compare on the same scenes.
+pub fn heldout(cfg: &TrainConfig, checkpoint: &Path, episodes: usize) -> Result<EvalResult> {
+    let mut learner = Learner::new(cfg.clone()).map_err(equiarm_train::TrainError::from)?;
+    learner.resume(checkpoint).map_err(equiarm_train::TrainError::from)?;
+    let env_cfg = equiarm_train::env::env_config(cfg)?;
+    let mut envs: Vec<equiarm_sim::Env> = (0..cfg.num_envs.max(1))
+        .map(|_| equiarm_sim::Env::new(env_cfg.clone()))
+        .collect::<std::result::Result<_, _>>()
+        .map_err(equiarm_train::TrainError::from)?;
+    Ok(evaluate_on(&mut learner, &mut envs, episodes, Stream::HeldOut)?)
 }
 
 /// Removes every checkpoint of a finished run but the latest (the final weights, with the replay):
