@@ -81,7 +81,7 @@ enum Command {
     /// check the paper's claims on the reports (docs/results/claims.toml).
     #[command(
         subcommand,
-        after_help = "Examples:\n  equiarm experiment run tasks --parallel 2\n  equiarm experiment status tasks\n  equiarm experiment report tasks\n  equiarm experiment claims"
+        after_help = "Examples:\n  equiarm experiment run tasks --parallel 2\n  equiarm experiment status tasks\n  equiarm experiment report tasks\n  equiarm experiment claims\n  equiarm experiment heldout runs/block_pulling-2026-12-08"
     )]
     Experiment(equiarm_experiment::cli::ExperimentCommand),
     /// Times the learner on a device beside the CPU (median SAC update and batch-1 action per
@@ -95,7 +95,7 @@ enum Command {
     /// started with ROS_SECURITY_ENABLE=true joins only in its enclave (docs/security.md).
     #[command(
         subcommand,
-        after_help = "Examples:\n  equiarm security create-keystore keys\n  equiarm security create-enclave keys /equiarm/env0/sim\n  equiarm security create-enclave keys /my_tool --all-topics --domain 7\n  equiarm security list-enclaves keys"
+        after_help = "Examples:\n  equiarm security create-keystore keys\n  equiarm security create-enclave keys /equiarm/env0/sim\n  equiarm security create-enclave keys /my_tool --all-topics --domain 7\n  equiarm security create-enclave keys /equiarm/trainer --key-password-file keys.password\n  equiarm security list-enclaves keys"
     )]
     Security(cmd::security::SecurityCommand),
 }
