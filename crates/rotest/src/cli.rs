@@ -294,13 +294,16 @@ pub(crate) fn summary(r: &crate::train::RotestRecord) -> String {
     )
 }
 
-/// The invariant bound of each setting whose dataset is in `root` (as `grid` and `data -o` name them).
+/// The invariant bound of each setting whose dataset is in `root` (as `grid` and `data -o` name them:
+/// the setting with `+` for `,`), the paper's settings and any other (`condition_reverse,full_circle`).
 pub(crate) fn bounds_of(root: &std::path::Path) -> Result<BTreeMap<String, f64>> {
     let mut bounds = BTreeMap::new();
-    for s in PAPER_SETTINGS {
-        let c = Corruptions::parse(s)?;
-        let dir = root.join(setting_file_stem(&c));
-        if dir.join(crate::dataset::FILE_NAME).is_file() {
+    let Ok(entries) = std::fs::read_dir(root) else { return Ok(bounds) };
+    for entry in entries.flatten() {
+        let dir = entry.path();
+        let Some(stem) = dir.file_name().and_then(|n| n.to_str()) else { continue };
+        let Ok(c) = Corruptions::parse(&stem.replace('+', ",")) else { continue };
+        if setting_file_stem(&c) == stem && dir.join(crate::dataset::FILE_NAME).is_file() {
             let h = Dataset::read_header(&dir)?;
             bounds.insert(c.name(), dataset_bound(&h.pairs, &c).uniform_rotation);
         }
@@ -416,4 +419,29 @@ pub fn run(cmd: RotestCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
         }
     }
     Ok(0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every dataset directory counts, the paper's settings and others (`condition_reverse,full_circle`
+    /// as `condition_reverse+full_circle`); a directory whose name is no setting is skipped.
+    #[test]
+    fn bounds_come_from_every_dataset_directory() {
+        let root = std::env::temp_dir().join(format!("equiarm_rotest_bounds_{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        for setting in ["none", "condition_reverse,full_circle"] {
+            let cfg = PairConfig { size: 16, supersample: 1, corruptions: Corruptions::parse(setting).unwrap() };
+            let ds = crate::generate::generate(&cfg, 8, 1).unwrap();
+            ds.write(&root.join(setting_file_stem(&cfg.corruptions))).unwrap();
+        }
+        std::fs::create_dir_all(root.join("not a setting")).unwrap();
+        let b = bounds_of(&root).unwrap();
+        assert_eq!(b.keys().cloned().collect::<Vec<_>>(), ["condition_reverse,full_circle", "none"]);
+        assert_eq!(b["none"], 1.0);
+        assert!((b["condition_reverse,full_circle"] - 0.625).abs() < 1e-9, "{b:?}");
+        assert!(bounds_of(&root.join("missing")).unwrap().is_empty());
+        std::fs::remove_dir_all(&root).unwrap();
+    }
 }
