@@ -3,7 +3,9 @@
 //! RustDDS's plugins read the key from a `file:` path and ignore the `dds.sec.auth.password`
 //! property, so a password-protected key must reach them decrypted. [`KeyInMemory`] holds it in an
 //! anonymous memory file (`memfd_create`): a new, private directory holds only a link `key.pem` to
-//! `/proc/self/fd/N`, which only this process can open. Both go when it is dropped, once the
+//! `/proc/self/fd/N`, which leads to the key only in this process (another process following the
+//! link reaches its own descriptor N; one of the same user allowed to trace this process could open
+//! `/proc/PID/fd/N`, as it could read this process's memory). Both go when it is dropped, once the
 //! participant is built (the plugins read the key once, while the participant is made).
 
 use std::fs::File;
