@@ -235,9 +235,7 @@ pub fn run(cmd: ExperimentCommand, stop: &dyn Fn() -> bool) -> Result<i32> {
             Ok(0)
         }
         ExperimentCommand::Heldout { dir, episodes, checkpoint } => {
-            let cfg: equiarm_sac::config::TrainConfig = equiarm_sac::learner::read_json(&dir.join("config.json"))
-                .map_err(|e| crate::ExperimentError::Run { dir: dir.clone(), message: format!("config.json: {e}") })?;
-            equiarm_train::config::check(&cfg).map_err(equiarm_train::TrainError::from)?;
+            let cfg = crate::runner::run_config(&dir)?;
             let checkpoint = match checkpoint {
                 Some(c) => c,
                 None => equiarm_train::rundir::find_checkpoint(&dir)?,

@@ -152,9 +152,7 @@ pub fn run_one(
     checkpoint_secs: f64,
     stop: &dyn Fn() -> bool,
 ) -> Result<Option<RunResult>> {
-    let cfg: TrainConfig = read_json(&dir.join("config.json"))
-        .map_err(|e| ExperimentError::Run { dir: dir.to_path_buf(), message: format!("config.json: {e}") })?;
-    equiarm_train::config::check(&cfg).map_err(equiarm_train::TrainError::from)?;
+    let cfg = run_config(dir)?;
     check_config(dir, &cfg)?;
     if let Some(r) = read_result(dir)? {
         return Ok(Some(r));
@@ -186,6 +184,14 @@ pub fn run_one(
     write_json(&path, &result)?;
     prune_checkpoints(dir)?;
     Ok(Some(result))
+}
+
+/// A run directory's `config.json`, checked (a grid's run, or any run of `equiarm train`).
+pub fn run_config(dir: &Path) -> Result<TrainConfig> {
+    let cfg: TrainConfig = read_json(&dir.join("config.json"))
+        .map_err(|e| ExperimentError::Run { dir: dir.to_path_buf(), message: format!("config.json: {e}") })?;
+    equiarm_train::config::check(&cfg).map_err(equiarm_train::TrainError::from)?;
+    Ok(cfg)
 }
 
 /// The greedy policy of `checkpoint` (a run of `cfg`: in-process, a grid's or the trainer node's)
