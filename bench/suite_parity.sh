@@ -11,7 +11,9 @@
 #
 # Each run uses both cores, one after the other (a seed's two runs about 35 + 30 min at reduced16 on
 # 2 cores). A seed whose run directories hold a finished run (its heldout.json) is not run again, so
-# an interrupted benchmark continues where it stopped. ROS_DOMAIN_ID defaults to 31 here.
+# an interrupted benchmark continues where it stopped. ROS_DOMAIN_ID defaults to 31 here. While each
+# run trains, bench/proc_usage.py samples every equiarm process (CPU seconds, peak RSS) into
+# RUN.usage.csv; a second table gives the CPU seconds per update of each role and its peak RSS.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seeds="0 1 2 3" updates=5000 task=block_pulling out=bench/out/suite_parity episodes=100
@@ -40,16 +42,20 @@ for s in $seeds; do
   if [ ! -f "$suite/heldout.json" ]; then
     rm -rf "$suite"
     t0=$(date +%s)
+    python3 bench/proc_usage.py --until-gone "$out/suite-s$s.usage.csv" & sampler=$!
     bash launch_scripts/train.sh --task "$task" --seed "$s" --total-updates "$updates" --run-dir "$suite" \
       "${extra[@]}" > "$out/suite-s$s.log" 2>&1
+    kill -TERM $sampler 2>/dev/null || true; wait $sampler
     echo "suite seed $s: $(( $(date +%s) - t0 )) s wall" | tee "$out/suite-s$s.time"
     RAYON_NUM_THREADS=1 "$bin" experiment heldout "$suite" --episodes "$episodes"
   fi
   if [ ! -f "$inproc/heldout.json" ]; then
     rm -rf "$inproc"
     t0=$(date +%s)
+    python3 bench/proc_usage.py --until-gone "$out/inprocess-s$s.usage.csv" & sampler=$!
     RAYON_NUM_THREADS=2 "$bin" train --in-process --config "$suite/config.json" --run-dir "$inproc" -q \
       > "$out/inprocess-s$s.log" 2>&1
+    kill -TERM $sampler 2>/dev/null || true; wait $sampler
     echo "in-process seed $s: $(( $(date +%s) - t0 )) s wall" | tee "$out/inprocess-s$s.time"
     RAYON_NUM_THREADS=1 "$bin" experiment heldout "$inproc" --episodes "$episodes"
   fi
@@ -87,4 +93,31 @@ for s in seeds:
     print("| " + " | ".join(line) + " |")
 print("| mean ± s.e. | " + " | ".join(
     f"{ms(cols[k][0])} | {ms(cols[k][1])} | | {ms(cols[k][2])}" for k in ("suite", "inprocess")) + " |")
+# CPU seconds per update and peak RSS of each role (bench/proc_usage.py), summed over the training
+# envs' sims and policies; mean over the seeds whose usage was sampled
+def group(r):
+    sub, _, ns = r.partition(" ")
+    return f"{sub} (eval)" if ns == "/eval" else (f"{sub} (training envs)" if ns else sub)
+usage = {}
+for k in ("suite", "inprocess"):
+    for s in seeds:
+        f = f"{out}/{k}-s{s}.usage.csv"
+        try:
+            rows = list(csv.DictReader(open(f)))
+        except FileNotFoundError:
+            continue
+        _, _, _, u = run(k, s)
+        per = {}
+        for r in rows:
+            g = per.setdefault(group(r["role"]), [0.0, 0.0])
+            g[0] += float(r["cpu_s"]) / max(u, 1)
+            g[1] = max(g[1], float(r["peak_rss_mib"]))
+        for g, (c, m) in per.items():
+            usage.setdefault((k, g), []).append((c, m))
+if usage:
+    print()
+    print("| run | role | CPU s per update | peak RSS MiB (largest process) | seeds |")
+    print("| --- | --- | --- | --- | --- |")
+    for (k, g), v in sorted(usage.items()):
+        print(f"| {k} | {g} | {ms([c for c, _ in v])} | {max(m for _, m in v):.0f} | {len(v)} |")
 EOF
