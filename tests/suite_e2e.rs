@@ -123,6 +123,17 @@ fn train_sh_runs_the_suite_to_the_end() {
         assert!(l.contains("camera elevation 60°") && l.contains("corruption random_reflection"), "{sim}:\n{l}");
     }
     learned(&run_dir, &["policy0", "policy1"]);
+    // the training policies say how old the weights they acted on were; in a run of 20 updates
+    // (weights every 5) no weights can be more than 20 updates behind
+    let stale: Vec<u64> = ["policy0", "policy1"]
+        .iter()
+        .filter_map(|p| {
+            log(&run_dir, p).lines().find_map(|l| {
+                l.split("updates behind the trainer").nth(1)?.split("max ").nth(1)?.trim_end_matches(')').parse().ok()
+            })
+        })
+        .collect();
+    assert!(!stale.is_empty() && stale.iter().all(|&m| m <= 20), "staleness maxima {stale:?}");
     assert!(run_dir.join("checkpoints/latest").is_file());
     assert!(run_dir.join("learning_curve.png").is_file());
     bag_opens(&run_dir.join("bag"));

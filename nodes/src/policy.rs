@@ -46,7 +46,9 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
         let ready = tokio::select! {
             s = &mut signal => { info!("{}: {} received, shutting down", node.name(), s?); break; }
             r = recv_some(status_sub.as_ref()) => {
-                gate.on_status(r?.0.updates);
+                let updates = r?.0.updates;
+                gate.on_status(updates);
+                policy.on_trainer_status(updates);
                 gate.release(&policy)
             }
             r = obs_sub.recv() => {
@@ -78,6 +80,17 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
                 info!("actor latency (batch 1, last 100): median {median:.2} ms, p95 {p95:.2} ms");
             }
         }
+    }
+    if let Some(s) = policy.staleness() {
+        info!(
+            "{}: the weights of {} learned actions were {:.1} updates behind the trainer on average (median {}, p95 {}, max {})",
+            node.name(),
+            s.actions,
+            s.mean,
+            s.median,
+            s.p95,
+            s.max
+        );
     }
     let held = if gate.holds() { " (one observation held back)" } else { "" };
     info!(

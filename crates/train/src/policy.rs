@@ -165,6 +165,28 @@ pub struct Policy {
     expert_episodes: u32,
     policy_steps: u64,
     answered: u64,
+    /// The trainer's update count when the weights in use were taken (their `updates`).
+    weights_updates: Option<u64>,
+    /// The trainer's update count as last heard (its TrainerStatus).
+    trainer_updates: Option<u64>,
+    /// Per learned action: how many updates the weights acted on were behind the trainer.
+    lags: Vec<u64>,
+}
+
+/// How old the weights behind the learned actions were: the trainer's update count as the node last
+/// heard it (TrainerStatus, once a second) minus the update count of the weights acted on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Staleness {
+    /// Learned actions with both counts known.
+    pub actions: usize,
+    /// Mean lag in updates.
+    pub mean: f64,
+    /// Median lag.
+    pub median: u64,
+    /// 95th percentile.
+    pub p95: u64,
+    /// Largest lag.
+    pub max: u64,
 }
 
 impl Policy {
@@ -200,6 +222,9 @@ impl Policy {
             expert_episodes: 0,
             policy_steps: 0,
             answered: 0,
+            weights_updates: None,
+            trainer_updates: None,
+            lags: Vec::new(),
         })
     }
 
@@ -276,6 +301,9 @@ impl Policy {
                 let t0 = Instant::now();
                 let u = equiarm_sac::learner::act_on(agent, &[&frame], s, act)?;
                 self.record_latency(t0.elapsed().as_secs_f64());
+                if let (Some(t), Some(w)) = (self.trainer_updates, self.weights_updates) {
+                    self.lags.push(t.saturating_sub(w));
+                }
                 (u[0], GripperCommand::SOURCE_POLICY)
             }
         };
@@ -321,6 +349,26 @@ impl Policy {
         Some((at(0.5), at(0.95)))
     }
 
+    /// A TrainerStatus said the trainer has made `updates` updates.
+    pub fn on_trainer_status(&mut self, updates: u64) {
+        self.trainer_updates = Some(updates);
+    }
+
+    /// How far behind the trainer the weights of the learned actions so far were; None before any
+    /// learned action with both counts known.
+    pub fn staleness(&self) -> Option<Staleness> {
+        let mut v = self.lags.clone();
+        v.sort_unstable();
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+        (!v.is_empty()).then(|| Staleness {
+            actions: v.len(),
+            mean: v.iter().sum::<u64>() as f64 / v.len() as f64,
+            median: at(0.5),
+            p95: at(0.95),
+            max: v[v.len() - 1],
+        })
+    }
+
     /// Takes new weights if they are ours (model, format, finite values) and newer within their run
     /// (the payload moves into the actor, uncopied). Weights of another run are taken too, and
     /// say so ([`WeightsOutcome::NewRun`]): a stray message can never make the node ignore its
@@ -347,6 +395,7 @@ impl Policy {
         match agent.load_actor_bytes(w.data, &label).map_err(|e| e.to_string()) {
             Ok(()) => {
                 self.version = w.version;
+                self.weights_updates = Some(w.updates);
                 match self.run.replace(w.run_id) {
                     Some(was) if !same_run => WeightsOutcome::NewRun { was },
                     _ => WeightsOutcome::Loaded,
@@ -425,5 +474,45 @@ mod tests {
         let expert = Policy::new(PolicyMode::Sample, arch.clone(), 19, None, 1).unwrap().with_expert_episodes(1);
         expert.screen(&announcing(8192)).unwrap();
         Policy::new(PolicyMode::Random, arch, 19, None, 1).unwrap().screen(&announcing(8192)).unwrap();
+    }
+
+    /// The staleness of the acting weights (issue 59): each learned action records how many updates
+    /// its weights were behind the trainer's last status; expert answers and actions before both
+    /// counts are known record nothing.
+    #[test]
+    fn learned_actions_record_how_far_behind_the_trainer_their_weights_were() {
+        let arch = tiny_cnn();
+        let mut policy = Policy::new(PolicyMode::Sample, arch.clone(), 16, None, 1).unwrap().with_expert_episodes(1);
+        let obs = |seq: u64, episode: u32| {
+            let mut o = Observation { seq, episode, env: "env0".into(), ..Default::default() };
+            o.set_frame(16, 16, &[90; 16 * 16 * 3], &[0.5; 16 * 16]).unwrap();
+            o
+        };
+        let trainer = Agent::new(arch, 2).unwrap();
+        let weights = |version: u64, updates: u64| PolicyWeights {
+            run_id: "r".into(),
+            version,
+            updates,
+            model: "cnn".into(),
+            format: "safetensors".into(),
+            data: trainer.actor_bytes().unwrap(),
+            ..Default::default()
+        };
+        policy.answer(&obs(0, 1)).unwrap(); // nothing known yet
+        policy.on_trainer_status(120);
+        policy.answer(&obs(1, 1)).unwrap(); // initial weights: their update count is not known
+        assert_eq!(policy.staleness(), None);
+        assert!(matches!(policy.on_weights(weights(2, 100)), WeightsOutcome::Loaded));
+        policy.answer(&obs(2, 0)).unwrap(); // an expert answer
+        for (seq, status) in [(3, 120), (4, 130), (5, 150)] {
+            policy.on_trainer_status(status);
+            policy.answer(&obs(seq, 1)).unwrap();
+        }
+        policy.answer(&obs(5, 1)).unwrap(); // a repeat of seq 5: the same command, no new action
+        assert!(matches!(policy.on_weights(weights(3, 150)), WeightsOutcome::Loaded));
+        policy.answer(&obs(6, 1)).unwrap();
+        let s = policy.staleness().unwrap();
+        assert_eq!((s.actions, s.median, s.p95, s.max), (4, 30, 50, 50));
+        assert!((s.mean - 25.0).abs() < 1e-9, "{s:?}");
     }
 }
