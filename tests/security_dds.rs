@@ -173,6 +173,21 @@ async fn a_keystore_made_with_openssl_by_hand_works() {
     assert!(r.cmds >= 5 && r.obs >= 5, "nodes with the openssl keystore exchanged only {r:?} in 30 s");
 }
 
+/// A keystore made by ROS 2's own tooling: sros2's `create_keystore` and `create_enclave` (sros2's
+/// governance for domain 78, its default permissions: every topic allowed), run by
+/// `bench/sros2_keystore.sh SROS2_CHECKOUT`, which passes the keystore in `EQUIARM_SROS2_KEYSTORE`.
+/// Ignored in the test command: sros2 is not on PyPI. The sim and the policy of env0 join with it
+/// and exchange commands and observations, encrypted.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs a keystore made by sros2: bash bench/sros2_keystore.sh SROS2_CHECKOUT"]
+async fn a_keystore_made_by_sros2_works() {
+    let ks = std::env::var_os("EQUIARM_SROS2_KEYSTORE")
+        .expect("EQUIARM_SROS2_KEYSTORE names the keystore sros2 made (bash bench/sros2_keystore.sh SROS2_CHECKOUT)");
+    let pair = SecuredPair::in_keystore(Path::new(&ks), 78);
+    let r = exchange(&pair.cmd_pub, &pair.obs_pub, &pair.cmd_sub, &pair.obs_sub, 30, 5).await;
+    assert!(r.cmds >= 5 && r.obs >= 5, "nodes with sros2's keystore exchanged only {r:?} in 30 s");
+}
+
 /// Enclaves whose keys are encrypted with a password (`create-enclave --key-password-file`): the
 /// sim and the policy of env0, given the password file, join and exchange commands and observations
 /// (the key decrypted into memory for the plugins); given a wrong password, a node does not start
