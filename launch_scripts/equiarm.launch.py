@@ -17,7 +17,8 @@ same as `train.sh` starts:
   --seed 1000·S+K --expert-episodes D --max-lead 10` (D: the config's demo episodes spread over the
   envs; `--deterministic` instead of `--max-lead` with deterministic:=true);
 - one evaluation pair in /eval: the sim with seed 1000·S+999 and `--eval`, the policy in
-  `--mode greedy`, throttled to what the evaluations need.
+  `--mode greedy --eval-every E --eval-episodes K` (the config's eval_every and eval_episodes: it
+  plays K episodes per evaluation, on the trainer's weights of that evaluation, and waits between).
 FRAME, INPUT and H (and the default model) come from the preset's config,
 `launch_scripts/configs/<preset>_<task>.json` (written by `configs/regenerate.sh` from
 `equiarm train --print-config`), or from the file given as `config:=FILE.json`, which the trainer
@@ -103,10 +104,13 @@ def commands(args):
         trainer.append("--deterministic")
     cmds.append(("trainer", trainer))
 
-    # as train.sh: demos spread over the envs, flow control (or lock-step), a throttled eval pair
+    # as train.sh: demos spread over the envs, flow control (or lock-step), an eval pair in windows
     per_env = (int(cfg["demo_episodes"]) + n - 1) // n
     pace = ["--deterministic"] if deterministic else ["--max-lead", "10"]
-    eval_rate = (int(cfg["eval_episodes"]) * 50 + int(cfg["eval_every"]) - 1) // (int(cfg["eval_every"]) + 1) + 1
+    every, episodes = int(cfg["eval_every"]), int(cfg["eval_episodes"])
+    # the eval pair plays the evaluations' episodes only (a config without evaluations: throttled)
+    eval_pace = (["--eval-every", str(every), "--eval-episodes", str(episodes)] if every > 0 and episodes > 0
+                 else ["--max-lead", "50", "--steps-per-update", "1"])
 
     def pair(ns, env_seed, mode, extra):
         name = ns.strip("/")
@@ -123,8 +127,7 @@ def commands(args):
 
     for k in range(n):
         cmds += pair(f"/env{k}", 1000 * seed + k, "sample", ["--expert-episodes", str(per_env)] + pace)
-    cmds += pair(EVAL_NAMESPACE, 1000 * seed + EVAL_SEED_OFFSET, "greedy",
-                 ["--max-lead", "50", "--steps-per-update", str(eval_rate)])
+    cmds += pair(EVAL_NAMESPACE, 1000 * seed + EVAL_SEED_OFFSET, "greedy", eval_pace)
     return cmds
 
 

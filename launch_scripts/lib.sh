@@ -251,19 +251,30 @@ eqa_suite_trainer() {
   }
 }
 
+# The sims and policies (training and eval) run at niceness EQA_ENV_NICE (default 0: as the
+# trainer), so that their many short steps can be kept from preempting the learner's threads.
+eqa_env_nice() {
+  if [ "${EQA_ENV_NICE:-0}" != 0 ]; then echo nice -n "$EQA_ENV_NICE"; fi
+}
+
 # eqa_suite_policies: the training policies (/env0 … /envN-1) and the greedy eval policy (/eval).
 eqa_suite_policies() {
   local i every episodes rate
   for i in $(seq 0 $((num_envs - 1))); do
-    eqa_start "policy$i" "$run_dir/logs/policy$i.log" "$EQUIARM_BIN" policy --namespace "/env$i" --mode sample \
+    eqa_start "policy$i" "$run_dir/logs/policy$i.log" $(eqa_env_nice) "$EQUIARM_BIN" policy --namespace "/env$i" --mode sample \
       "${arch[@]}" --seed $((seed * 1000 + i)) --expert-episodes "$per_env" "${pace[@]}"
   done
-  # the eval pair may run about eval_episodes × 50 steps per eval_every updates
+  # the eval pair plays the evaluations' episodes only: eval_episodes of them on the trainer's weights
+  # of each evaluation (every eval_every updates), waiting in between (without evaluations: throttled)
   every=$(eqa_config_get "$run_dir/config.json" eval_every)
   episodes=$(eqa_config_get "$run_dir/config.json" eval_episodes)
-  rate=$(( (episodes * 50 + every - 1) / (every + 1) + 1 ))
-  eqa_start policy_eval "$run_dir/logs/policy_eval.log" "$EQUIARM_BIN" policy --namespace /eval --mode greedy \
-    "${arch[@]}" --seed $((seed * 1000 + 999)) --max-lead 50 --steps-per-update "$rate"
+  if [ "$every" -gt 0 ] && [ "$episodes" -gt 0 ]; then
+    rate=(--eval-every "$every" --eval-episodes "$episodes")
+  else
+    rate=(--max-lead 50 --steps-per-update 1)
+  fi
+  eqa_start policy_eval "$run_dir/logs/policy_eval.log" $(eqa_env_nice) "$EQUIARM_BIN" policy --namespace /eval --mode greedy \
+    "${arch[@]}" --seed $((seed * 1000 + 999)) "${rate[@]}"
 }
 
 # eqa_scene_args FILE: the sim flags for a training config's camera view, corruptions and arm
@@ -281,7 +292,7 @@ eqa_suite_sim() {
   local i=$1 name=${2:-sim$1} clock=() scene
   [ "$i" -eq 0 ] && clock=(--clock)
   mapfile -t scene < <(eqa_scene_args "$run_dir/config.json")
-  eqa_start "$name" "$run_dir/logs/$name.log" "$EQUIARM_BIN" sim --namespace "/env$i" --task "$task" \
+  eqa_start "$name" "$run_dir/logs/$name.log" $(eqa_env_nice) "$EQUIARM_BIN" sim --namespace "/env$i" --task "$task" \
     --seed $((seed * 1000 + i)) --resolution "$image" "${scene[@]}" "${clock[@]}" --stamp-origin "$EQA_STAMP_ORIGIN" \
     --wait-subscribers "${sim_wait:-0}"
 }
@@ -291,7 +302,7 @@ eqa_suite_sims() {
   local i scene
   for i in $(seq 0 $((num_envs - 1))); do eqa_suite_sim "$i"; done
   mapfile -t scene < <(eqa_scene_args "$run_dir/config.json")
-  eqa_start sim_eval "$run_dir/logs/sim_eval.log" "$EQUIARM_BIN" sim --namespace /eval --eval --task "$task" \
+  eqa_start sim_eval "$run_dir/logs/sim_eval.log" $(eqa_env_nice) "$EQUIARM_BIN" sim --namespace /eval --eval --task "$task" \
     --seed $((seed * 1000 + 999)) --resolution "$image" "${scene[@]}" --stamp-origin "$EQA_STAMP_ORIGIN" \
     --wait-subscribers "${sim_wait:-0}"
 }

@@ -35,7 +35,8 @@
 #   -- ARGS...          passed on to `equiarm train`; `--run-dir RUN -- --resume RUN` continues the run
 #                       in RUN (its recorder writes a new bag beside the first: RUN/bag-2, ...)
 # Environment: ROS_DOMAIN_ID (default 0), ROS_LOCALHOST_ONLY (default 1: loopback only),
-# EQUIARM_BIN (use this binary instead of building), CARGO_TARGET_DIR.
+# EQUIARM_BIN (use this binary instead of building), CARGO_TARGET_DIR, EQA_ENV_NICE (niceness of the
+# sims and policies, default 0: as the trainer and the recorder).
 #
 # Example: bash launch_scripts/train.sh --task block_pulling --num-envs 5
 set -euo pipefail

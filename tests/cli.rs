@@ -132,7 +132,7 @@ fn out_of_range_numbers_are_refused_at_the_flag_naming_the_range() {
     let bag = bag.to_str().unwrap();
     let run = dir.join("run");
     let run = run.to_str().unwrap();
-    let cases: [(&[&str], &str); 24] = [
+    let cases: [(&[&str], &str); 27] = [
         (&["record", "-o", bag, "--all", "--duration-s", "inf"], "outside (0, 2592000]"),
         (&["record", "-o", bag, "--all", "--duration-s", "NaN"], "outside (0, 2592000]"),
         (&["record", "-o", bag, "--all", "--flush-ms", "18446744073709551615"], "outside 1..=3600000"),
@@ -144,6 +144,9 @@ fn out_of_range_numbers_are_refused_at_the_flag_naming_the_range() {
         (&["bag", "play", bag, "--lockstep", "0"], "outside 1..=3600000"),
         (&["sim", "--timeout-ms", "18446744073709551615"], "outside 1..=3600000"),
         (&["policy", "--steps-per-update", "18446744073709551615"], "outside 1..=1000000"),
+        (&["policy", "--eval-every", "0"], "0 updates is outside 1..=1000000"),
+        (&["policy", "--eval-every", "10", "--max-lead", "5"], "cannot be used with '--max-lead"),
+        (&["policy", "--eval-every", "10", "--mode", "expert"], "--eval-every needs --mode sample or greedy"),
         (&["train", "--idle-timeout-s", "inf"], "outside (0, 2592000]"),
         (&["train", "--in-process", "--run-dir", run, "--num-envs", "1000000"], "num_envs"),
         (&["train", "--in-process", "--run-dir", run, "--hidden", "100000000"], "agent.hidden"),

@@ -101,6 +101,16 @@ pub fn positive_steps(s: &str) -> Result<u64, BadValue> {
     bounded(s, "steps", 1, MAX_STEPS)
 }
 
+/// An update count that must be at least 1: 1 ..= [`MAX_STEPS`].
+pub fn positive_updates(s: &str) -> Result<u64, BadValue> {
+    bounded(s, "updates", 1, MAX_STEPS)
+}
+
+/// An episode count that must be at least 1: 1 ..= [`MAX_STEPS`].
+pub fn positive_episodes(s: &str) -> Result<u64, BadValue> {
+    bounded(s, "episodes", 1, MAX_STEPS)
+}
+
 /// A whole number in `min ..= max` (`unit` only words the error).
 pub fn bounded(s: &str, unit: &str, min: u64, max: u64) -> Result<u64, BadValue> {
     let v: u64 = s

@@ -23,7 +23,10 @@ pub async fn run(args: &PolicyArgs, opts: &RosOptions) -> anyhow::Result<u64> {
     let (agent, frame, actor) = architecture(args)?;
     let mut policy = Policy::new(args.mode, agent.clone(), frame, actor.as_deref(), args.seed)?
         .with_expert_episodes(args.expert_episodes);
-    let mut gate = Gate::new(args.max_lead, args.steps_per_update, args.deterministic, policy.learns())?;
+    let mut gate = match args.eval_every {
+        Some(every) => Gate::windows(every, args.eval_episodes, policy.learns())?,
+        None => Gate::new(args.max_lead, args.steps_per_update, args.deterministic, policy.learns())?,
+    };
     let mut node = RosNode::new(&args.namespace, "policy", opts)?;
     let obs_sub = node.subscription::<Observation>("observation", qos::command())?;
     let cmd_pub = node.publisher::<GripperCommand>("gripper_cmd", qos::command())?;

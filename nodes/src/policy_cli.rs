@@ -56,6 +56,15 @@ pub struct PolicyArgs {
     /// expert steps included) waits for weights version k + 1. Needs mode sample or greedy; excludes --max-lead.
     #[arg(long)]
     pub deterministic: bool,
+    /// The evaluation env's pacing: start episodes only in evaluation windows, --eval-episodes of
+    /// them once the weights in use were taken at the next multiple of N updates (the trainer's
+    /// evaluations), and wait at an episode's first observation in between. Needs mode sample or
+    /// greedy; excludes --max-lead and --deterministic.
+    #[arg(long, value_name = "N", value_parser = crate::cli_values::positive_updates, conflicts_with_all = ["max_lead", "deterministic"])]
+    pub eval_every: Option<u64>,
+    /// With --eval-every: episodes per evaluation window (the trainer's eval_episodes).
+    #[arg(long, value_name = "K", default_value_t = 20, value_parser = crate::cli_values::positive_episodes, requires = "eval_every")]
+    pub eval_episodes: u64,
     /// No latency lines.
     #[arg(long, short)]
     pub quiet: bool,

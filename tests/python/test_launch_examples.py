@@ -328,6 +328,10 @@ def test_launch_file_starts_n_pairs_eval_trainer_and_recorder(launch_file):
         if ns != "/eval":  # demos spread over the 3 envs, flow control on the trainer
             assert _flag(pol, "--expert-episodes") == str((cfg["demo_episodes"] + 2) // 3)
             assert _flag(pol, "--max-lead") == "10" and "--deterministic" not in pol
+        else:  # the evaluations' episodes only, in windows
+            assert (_flag(pol, "--eval-every"), _flag(pol, "--eval-episodes")) == \
+                (str(cfg["eval_every"]), str(cfg["eval_episodes"]))
+            assert "--max-lead" not in pol
     assert "--deterministic" not in tr
     # one clock origin for every sim: the launch's start (whole seconds since 1970), not 1970 itself
     (origin,) = origins

@@ -1,6 +1,7 @@
 //! When the policy node may answer an Observation, without DDS: at once, under flow control
-//! (`--max-lead`, on the trainer's update count from `/trainer/status`), or in the deterministic
-//! lock-step (`--deterministic`, on the version of the weights in use).
+//! (`--max-lead`, on the trainer's update count from `/trainer/status`), in the deterministic
+//! lock-step (`--deterministic`, on the version of the weights in use), or in evaluation windows
+//! (`--eval-every`, on the update count of the weights in use).
 //!
 //! An Observation that may not be answered yet is held (one at a time: the sim waits for its answer,
 //! and a re-publication of the same seq replaces it) and released when a TrainerStatus or new weights
@@ -30,6 +31,10 @@ pub struct Standing {
     pub answered: u64,
     /// Version of the weights in use (0: the node's own initial ones).
     pub version: u64,
+    /// The Observation starts an episode (its step is 0).
+    pub episode_start: bool,
+    /// The trainer's update count when the weights in use were taken (None: the node's own).
+    pub weights_updates: Option<u64>,
 }
 
 /// The gating rule of one policy node.
@@ -61,6 +66,21 @@ pub enum Rule {
     },
     /// `--deterministic`: the k-th distinct Observation waits for weights version k + 1.
     Lockstep,
+    /// `--eval-every N --eval-episodes K`, the evaluation env's: episodes start only in evaluation
+    /// windows, the trainer's: once the weights in use were taken at `next` updates or later (a
+    /// multiple of N), K episodes start, all acted on by weights of the window (an episode under
+    /// way is never held); the next window opens at the multiple of N after the weights that
+    /// started the K-th. Between windows the env waits at an episode's first observation.
+    Windows {
+        /// Updates between evaluations.
+        every: u64,
+        /// Episodes per evaluation.
+        episodes: u64,
+        /// The update count the weights must have reached for the window to open.
+        next: u64,
+        /// Episodes started in the open window.
+        started: u64,
+    },
 }
 
 /// A [`Rule`] and the Observation it holds back.
@@ -94,6 +114,19 @@ impl Gate {
                 anchor: false,
             },
         };
+        Ok(Gate { rule, held: None, newer_logged: false })
+    }
+
+    /// The evaluation env's gate: `episodes` episodes in a window every `every` updates (both at
+    /// least 1), on weights from the trainer (`learns`).
+    pub fn windows(every: u64, episodes: u64, learns: bool) -> anyhow::Result<Self> {
+        if !learns {
+            bail!("--eval-every needs --mode sample or greedy (its windows open on the trainer's weights)");
+        }
+        if every == 0 || episodes == 0 {
+            bail!("--eval-every {every} --eval-episodes {episodes}: both must be at least 1");
+        }
+        let rule = Rule::Windows { every, episodes, next: every, started: 0 };
         Ok(Gate { rule, held: None, newer_logged: false })
     }
 
@@ -160,6 +193,24 @@ impl Gate {
                 }
                 p.version >= want
             }
+            Rule::Windows { every, episodes, next, started } => {
+                if !p.episode_start {
+                    return true;
+                }
+                match p.weights_updates {
+                    Some(w) if w >= *next => {
+                        *started += 1;
+                        if *started == *episodes {
+                            // The trainer's evaluation ends at its count when the K-th episode ends,
+                            // at least `w`: its next is then at or after this one.
+                            *next = (w / *every + 1) * *every;
+                            *started = 0;
+                        }
+                        true
+                    }
+                    _ => false,
+                }
+            }
         }
     }
 
@@ -194,7 +245,34 @@ mod tests {
     use super::*;
 
     fn p(answered: u64, version: u64) -> Standing {
-        Standing { answered, version, policy_step: true, policy_steps: answered, repeat: false }
+        Standing { answered, version, policy_step: true, policy_steps: answered, ..Standing::default() }
+    }
+
+    /// An evaluation env's observation: an episode's first or a later one, weights taken at `w`.
+    fn eval(start: bool, w: Option<u64>) -> Standing {
+        Standing { episode_start: start, weights_updates: w, policy_step: true, ..Standing::default() }
+    }
+
+    #[test]
+    fn eval_windows_start_k_episodes_per_window_on_weights_of_the_window() {
+        let mut g = Gate::windows(100, 2, true).unwrap();
+        assert!(!g.needs_status());
+        assert!(!g.allows(eval(true, None), 0), "the node's own weights open no window");
+        assert!(!g.allows(eval(true, Some(50)), 0), "weights older than the first window");
+        assert!(g.allows(eval(false, Some(50)), 0), "an episode under way is never held");
+        assert!(g.allows(eval(true, Some(100)), 1), "the window at 100 opens");
+        assert!(g.allows(eval(false, Some(100)), 2));
+        assert!(g.allows(eval(true, Some(150)), 3), "its second episode");
+        assert!(!g.allows(eval(true, Some(150)), 4), "the window is full");
+        assert!(g.allows(Standing { repeat: true, ..eval(true, Some(150)) }, 3), "a re-publication passes");
+        assert!(g.allows(eval(true, Some(200)), 5), "the next window");
+        // a slow window: its second episode starts on weights of 350, so the next opens at 400
+        assert!(g.allows(eval(true, Some(350)), 6));
+        assert!(!g.allows(eval(true, Some(399)), 7) && g.allows(eval(true, Some(400)), 7));
+        let e = Gate::windows(100, 20, false).unwrap_err().to_string();
+        assert!(e.contains("sample or greedy"), "{e}");
+        let e = Gate::windows(0, 20, true).unwrap_err().to_string();
+        assert!(e.contains("at least 1"), "{e}");
     }
 
     #[test]

@@ -244,6 +244,8 @@ impl Policy {
             policy_steps: self.policy_steps,
             answered: self.answered,
             version: self.version,
+            episode_start: obs.step == 0,
+            weights_updates: self.weights_updates,
         }
     }
 

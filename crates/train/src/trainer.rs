@@ -7,8 +7,9 @@
 //!
 //! - One update per `num_envs` non-eval transitions once the replay holds `training_starts`
 //!   (docs/paper.md §2); updates owed while one runs are caught up ([`UpdateDebt`]).
-//! - Weights: version 1 (the initial actor) at start, then after the first update and every
-//!   `weights_every` updates, all with the run's id (made at a fresh start, kept in checkpoints), so
+//! - Weights: version 1 (the initial actor) at start, then after the first update, every
+//!   `weights_every` updates and at every multiple of `eval_every` (where the eval policy's windows
+//!   open), all with the run's id (made at a fresh start, kept in checkpoints), so
 //!   a policy can tell a new run from an old version.
 //! - Evaluations as in the paper: the eval env's episodes that end once the update count has
 //!   reached the next multiple of `eval_every`, `eval_episodes` of them; the ones in between are
@@ -429,7 +430,12 @@ impl Trainer {
         // Lock-step: the round's weights, except after the last update (the envs stop there).
         let weights = match self.lockstep {
             Some(_) => u < self.cfg.total_updates,
-            None => u == 1 || (self.opts.weights_every > 0 && u.is_multiple_of(self.opts.weights_every)),
+            // (and at every evaluation's update count: the eval policy's windows open on them)
+            None => {
+                u == 1
+                    || (self.opts.weights_every > 0 && u.is_multiple_of(self.opts.weights_every))
+                    || (self.cfg.eval_every > 0 && u.is_multiple_of(self.cfg.eval_every))
+            }
         };
         if self.cfg.checkpoint_every > 0 && u.is_multiple_of(self.cfg.checkpoint_every) {
             self.checkpoint(learner)?;
