@@ -2,11 +2,12 @@
 """CPU time and peak RSS of every equiarm process while a job runs (issue 59: what the suite's
 sims, policies, recorder and trainer each cost per update).
 
-    python3 bench/proc_usage.py OUT.csv [--every 5] [--until-gone]
+    python3 bench/proc_usage.py OUT.csv [--every 5] [--until-gone] [--exe PATH]
 
 Samples /proc every `--every` seconds: each process whose program is named `equiarm` (or
 `equiarm-*`), its role (the subcommand and, for sims and policies, the namespace: `sim /env0`,
-`policy /eval`, `train`, `record`), its CPU seconds (user + system) and its peak RSS (VmHWM). It stops on
+`policy /eval`, `train`, `record`; with `--exe`, only processes of that binary, so that other
+equiarm processes on the machine are not counted), its CPU seconds (user + system) and its peak RSS (VmHWM). It stops on
 SIGINT/SIGTERM or, with `--until-gone`, once processes were seen and none is left, and writes one
 row per process: pid, role, cpu_s, peak_rss_mib, first_seen_s, last_seen_s (seconds since start).
 CPU time after the last sample of a process is not counted (at most `--every` seconds of it).
@@ -31,12 +32,14 @@ def role(argv):
     return f"{sub} {ns}".strip()
 
 
-def sample(pid):
+def sample(pid, exe=None):
     """(argv, cpu seconds, peak RSS MiB) of a process, or None if it is not ours or gone."""
     try:
         with open(f"/proc/{pid}/cmdline", "rb") as f:
             argv = [a.decode(errors="replace") for a in f.read().split(b"\0") if a]
         if not argv or not os.path.basename(argv[0]).startswith("equiarm"):
+            return None
+        if exe is not None and os.path.realpath(f"/proc/{pid}/exe") != exe:
             return None
         with open(f"/proc/{pid}/stat") as f:
             # the fields after the command name in parentheses; utime and stime are fields 14, 15
@@ -57,7 +60,9 @@ def main():
     p.add_argument("out")
     p.add_argument("--every", type=float, default=5.0)
     p.add_argument("--until-gone", action="store_true")
+    p.add_argument("--exe", help="count only processes of this binary")
     a = p.parse_args()
+    exe = os.path.realpath(a.exe) if a.exe else None
     stop = []
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, lambda *_: stop.append(1))
@@ -69,7 +74,7 @@ def main():
         for name in os.listdir("/proc"):
             if not name.isdigit() or int(name) == os.getpid():
                 continue
-            s = sample(name)
+            s = sample(name, exe)
             if s is None:
                 continue
             alive += 1

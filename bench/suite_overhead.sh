@@ -37,7 +37,7 @@ mkdir -p "$out"
 for n in $nices; do
   run="$out/nice$n"
   rm -rf "$run"
-  python3 bench/proc_usage.py --until-gone "$out/nice$n.usage.csv" & sampler=$!
+  python3 bench/proc_usage.py --until-gone --exe "$EQUIARM_BIN" "$out/nice$n.usage.csv" & sampler=$!
   EQA_ENV_NICE=$n bash launch_scripts/train.sh --seed "$seed" --total-updates "$updates" --run-dir "$run" \
     "${extra[@]}" > "$out/nice$n.log" 2>&1
   kill -TERM $sampler 2>/dev/null || true; wait $sampler

@@ -42,7 +42,7 @@ for s in $seeds; do
   if [ ! -f "$suite/heldout.json" ]; then
     rm -rf "$suite"
     t0=$(date +%s)
-    python3 bench/proc_usage.py --until-gone "$out/suite-s$s.usage.csv" & sampler=$!
+    python3 bench/proc_usage.py --until-gone --exe "$bin" "$out/suite-s$s.usage.csv" & sampler=$!
     bash launch_scripts/train.sh --task "$task" --seed "$s" --total-updates "$updates" --run-dir "$suite" \
       "${extra[@]}" > "$out/suite-s$s.log" 2>&1
     kill -TERM $sampler 2>/dev/null || true; wait $sampler
@@ -52,7 +52,7 @@ for s in $seeds; do
   if [ ! -f "$inproc/heldout.json" ]; then
     rm -rf "$inproc"
     t0=$(date +%s)
-    python3 bench/proc_usage.py --until-gone "$out/inprocess-s$s.usage.csv" & sampler=$!
+    python3 bench/proc_usage.py --until-gone --exe "$bin" "$out/inprocess-s$s.usage.csv" & sampler=$!
     RAYON_NUM_THREADS=2 "$bin" train --in-process --config "$suite/config.json" --run-dir "$inproc" -q \
       > "$out/inprocess-s$s.log" 2>&1
     kill -TERM $sampler 2>/dev/null || true; wait $sampler
